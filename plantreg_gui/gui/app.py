@@ -1,0 +1,75 @@
+"""``plantreg-gui``: the desktop application.
+
+Start options open a view straight away; ``--screenshot PATH`` waits until the opened view has
+finished its work, saves a PNG of the window and exits (for docs and for checking by eye).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from .. import __version__
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="plantreg-gui", description="plantreg desktop application")
+    p.add_argument("--version", action="version", version=f"plantreg {__version__}")
+    g = p.add_argument_group("registration workspace")
+    g.add_argument("--demo", action="store_true", help="open the built-in demo rig and recording and register it")
+    g.add_argument("--rig", type=Path, help="rig file (plantreg.rig JSON)")
+    g.add_argument("--recording", type=Path, help="recording folder (with recording.json)")
+    g.add_argument("--target", help="target camera to register to")
+    g.add_argument("--view", help="workspace view to show: raw, side-by-side, mosaic, masks, 3d")
+    g = p.add_argument_group("calibration wizard")
+    g.add_argument("--calibrate-demo", action="store_true", help="open the synthetic calibration session of the demo")
+    g.add_argument("--session", type=Path, help="open a capture session folder in the calibration wizard")
+    g.add_argument("--page", type=int, help="wizard page to show (1-7); earlier pages' work is run first")
+    g = p.add_argument_group("automation")
+    g.add_argument("--screenshot", type=Path, help="save a PNG of the window once the work is done, then exit")
+    g.add_argument("--size", default="1500x950", help="window size WxH (default 1500x950)")
+    g.add_argument("--timeout", type=float, default=300.0, help="seconds to wait for work before a screenshot")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        w, h = (int(x) for x in args.size.lower().split("x"))
+    except ValueError:
+        print(f"plantreg-gui: error: --size must be WIDTHxHEIGHT, got '{args.size}'", file=sys.stderr)
+        return 2
+    os.environ.setdefault("QT_API", "pyside6")
+    from PySide6.QtWidgets import QApplication
+
+    from .main_window import MainWindow
+
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    app.setApplicationName("plantreg")
+    app.setOrganizationName("plantreg")
+    app.setApplicationVersion(__version__)
+    win = MainWindow()
+    win.resize(w, h)
+    win.show()
+    try:
+        win.apply_start_options(args)
+    except Exception as e:  # user mistakes reach the user as text, not a traceback
+        from ..core.errors import PlantregError
+
+        if not isinstance(e, PlantregError):
+            raise
+        print(f"plantreg-gui: error: {e}", file=sys.stderr)
+        if args.screenshot:
+            return 1
+        from .workers import show_error
+
+        show_error(win, "Cannot open", str(e))
+    if args.screenshot:
+        win.screenshot_when_idle(args.screenshot, args.timeout)
+    return app.exec()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

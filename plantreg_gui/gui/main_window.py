@@ -1,0 +1,96 @@
+"""The main window: a registration workspace and a calibration wizard, one tab each."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from PySide6.QtCore import QTimer
+from PySide6.QtWidgets import QApplication, QMainWindow, QTabWidget
+
+from .. import __version__
+
+
+class MainWindow(QMainWindow):
+    def __init__(self) -> None:
+        super().__init__()
+        self.setWindowTitle(f"plantreg {__version__}")
+        self.tabs = QTabWidget(self)
+        self.tabs.setDocumentMode(True)
+        self.setCentralWidget(self.tabs)
+        from .registration.workspace import RegistrationWorkspace
+        from .calibration.wizard import CalibrationWizard
+
+        self.workspace = RegistrationWorkspace(self)
+        self.wizard = CalibrationWizard(self)
+        self.tabs.addTab(self.workspace, "Registration")
+        self.tabs.addTab(self.wizard, "Calibration")
+        self.statusBar()
+
+    # ------------------------------------------------------------------ start options
+    def apply_start_options(self, args) -> None:
+        if args.calibrate_demo or args.session:
+            self.tabs.setCurrentWidget(self.wizard)
+            if args.calibrate_demo:
+                self.wizard.load_demo()
+            else:
+                self.wizard.open_session(args.session)
+            if args.page:
+                self.wizard.go_to_page(args.page)
+        elif args.demo or args.rig or args.recording:
+            self.tabs.setCurrentWidget(self.workspace)
+            if args.demo:
+                self.workspace.load_demo(target=args.target)
+            else:
+                if args.rig:
+                    self.workspace.open_rig(args.rig)
+                if args.recording:
+                    self.workspace.open_recording(args.recording)
+                if args.target and args.rig and args.recording:
+                    self.workspace.run_registration(args.target)
+            if args.view:
+                self.workspace.set_view(args.view)
+
+    def is_busy(self) -> bool:
+        return self.workspace.is_busy() or self.wizard.is_busy()
+
+    # ------------------------------------------------------------------ screenshots
+    def screenshot_when_idle(self, path: Path, timeout: float) -> None:
+        """Poll until no view is busy (and stays idle briefly), then grab the window and quit."""
+        t0 = time.monotonic()
+        state = {"idle_since": None}
+
+        def tick() -> None:
+            now = time.monotonic()
+            if self.is_busy() and now - t0 < timeout:
+                state["idle_since"] = None
+                return
+            if state["idle_since"] is None:
+                state["idle_since"] = now
+                return
+            if now - state["idle_since"] < 0.5 and now - t0 < timeout:
+                return
+            timer.stop()
+            self.save_screenshot(path)
+            QApplication.instance().exit(0 if now - t0 < timeout else 3)
+
+        timer = QTimer(self)
+        timer.timeout.connect(tick)
+        timer.start(100)
+        self._screenshot_timer = timer
+
+    def save_screenshot(self, path: Path) -> None:
+        for w in (self.workspace, self.wizard):
+            prep = getattr(w, "prepare_screenshot", None)
+            if prep is not None:
+                prep()
+        QApplication.processEvents()
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.grab().save(str(path), "PNG")
+        print(f"screenshot saved to {path}")
+
+    def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        for w in (self.workspace, self.wizard):
+            w.shutdown()
+        super().closeEvent(event)

@@ -1,0 +1,125 @@
+"""Running core routines off the GUI thread.
+
+A core routine takes a ``progress: Reporter`` keyword. :class:`Worker` runs it on a QThread,
+turns its progress calls into a Qt signal, and cancels it through the Reporter's token (the
+routine raises ``Cancelled`` at its next progress call). Results and errors come back as signals
+on the GUI thread; :func:`show_error` is the one place where errors become dialogs.
+"""
+
+from __future__ import annotations
+
+import traceback
+from typing import Any, Callable
+
+from PySide6.QtCore import QObject, QThread, Signal, Slot
+from PySide6.QtWidgets import QMessageBox, QWidget
+
+from ..core.errors import Cancelled, PlantregError
+from ..core.progress import CancelToken, Reporter
+
+
+class _Runner(QObject):
+    progress = Signal(float, str)
+    finished = Signal(object)
+    failed = Signal(str, str)  # (message, details)
+    cancelled = Signal()
+
+    def __init__(self, fn: Callable[..., Any], args: tuple, kwargs: dict, token: CancelToken):
+        super().__init__()
+        self._fn, self._args, self._kwargs, self._token = fn, args, kwargs, token
+
+    @Slot()
+    def run(self) -> None:
+        reporter = Reporter(lambda f, m: self.progress.emit(f, m), self._token)
+        try:
+            result = self._fn(*self._args, progress=reporter, **self._kwargs)
+        except Cancelled:
+            self.cancelled.emit()
+        except PlantregError as e:
+            self.failed.emit(str(e), "")
+        except MemoryError:
+            self.failed.emit("Out of memory. Close other views or use a smaller target camera.", traceback.format_exc())
+        except Exception as e:  # a bug: show it readably, keep the details for a report
+            self.failed.emit(f"Unexpected error: {type(e).__name__}: {e}", traceback.format_exc())
+        else:
+            self.finished.emit(result)
+
+
+class Worker(QObject):
+    """Run ``fn(*args, progress=Reporter, **kwargs)`` on its own thread.
+
+    Signals (delivered on the GUI thread): ``progress(fraction, message)``, ``finished(result)``,
+    ``failed(message, details)``, ``cancelled()``, and ``done()`` after any of the last three.
+    Keep a reference until ``done``.
+    """
+
+    progress = Signal(float, str)
+    finished = Signal(object)
+    failed = Signal(str, str)
+    cancelled = Signal()
+    done = Signal()
+
+    def __init__(self, fn: Callable[..., Any], *args: Any, parent: QObject | None = None, **kwargs: Any):
+        super().__init__(parent)
+        self.token = CancelToken()
+        self._thread = QThread()
+        self._runner = _Runner(fn, args, kwargs, self.token)
+        self._runner.moveToThread(self._thread)
+        self._thread.started.connect(self._runner.run)
+        self._runner.progress.connect(self.progress)
+        self._runner.finished.connect(self._on_finished)
+        self._runner.failed.connect(self._on_failed)
+        self._runner.cancelled.connect(self._on_cancelled)
+        self._running = False
+
+    def start(self) -> "Worker":
+        self._running = True
+        self._thread.start()
+        return self
+
+    def cancel(self) -> None:
+        self.token.cancel()
+
+    def is_running(self) -> bool:
+        return self._running
+
+    def wait(self, ms: int = 30000) -> bool:
+        """Cancel and wait for the thread to end (for closing the window)."""
+        self.token.cancel()
+        return self._thread.wait(ms)
+
+    def _end(self) -> None:
+        self._running = False
+        self._thread.quit()
+        self._thread.wait()
+        self.done.emit()
+
+    @Slot(object)
+    def _on_finished(self, result: object) -> None:
+        self._thread.quit()
+        self._thread.wait()
+        self.finished.emit(result)
+        self._end()
+
+    @Slot(str, str)
+    def _on_failed(self, message: str, details: str) -> None:
+        self._thread.quit()
+        self._thread.wait()
+        self.failed.emit(message, details)
+        self._end()
+
+    @Slot()
+    def _on_cancelled(self) -> None:
+        self._thread.quit()
+        self._thread.wait()
+        self.cancelled.emit()
+        self._end()
+
+
+def show_error(parent: QWidget | None, title: str, message: str, details: str = "") -> None:
+    """The one place where errors become dialogs (non-modal-safe: uses open() under tests)."""
+    box = QMessageBox(QMessageBox.Icon.Warning, title, message, QMessageBox.StandardButton.Ok, parent)
+    if details:
+        box.setDetailedText(details)
+    box.setObjectName("errorDialog")
+    box.open()
