@@ -1,0 +1,33 @@
+"""Shared fixtures. The demo (synthetic rig, recording, ground truth, calibration session) is
+written once per test session and shared read-only by CLI and GUI tests."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("QT_API", "pyside6")
+os.environ.setdefault("PYVISTA_OFF_SCREEN", "false")
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def demo_dir(tmp_path_factory) -> Path:
+    """A demo folder as `plantreg demo` writes it (rig.json, recording/, ground_truth/, calibration/).
+    Tests must not modify it."""
+    from plantreg_gui.core.synthetic import write_demo
+
+    folder = tmp_path_factory.mktemp("demo") / "demo"
+    write_demo(folder)
+    return folder
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """`../shared/data` beside the project (real data sets)."""
+    if not SHARED.is_dir():
+        pytest.fail(f"shared data folder not found at {SHARED}")
+    return SHARED
