@@ -68,6 +68,23 @@ def read_image(path: str | Path) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------- atomic writing
+def _umask() -> int:
+    """The process umask, read without changing it (os.umask would race with other threads)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    return 0o022
+
+
+def _publish(tmp: Path, is_dir: bool = False) -> None:
+    """Give a temp file/folder the permissions of an ordinary new one before it is moved into
+    place (mkstemp/mkdtemp make 0600/0700, which would hide results on shared disks)."""
+    os.chmod(tmp, (0o777 if is_dir else 0o666) & ~_umask())
+
+
 def _tmp_beside(path: Path) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
     os.close(fd)
@@ -87,6 +104,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     tmp = _tmp_beside(path)
     try:
         yield tmp
+        _publish(tmp)
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
@@ -103,6 +121,7 @@ def atomic_path_suffixed(path: str | Path) -> Iterator[Path]:
     tmp = Path(tmp_s)
     try:
         yield tmp
+        _publish(tmp)
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
@@ -125,11 +144,22 @@ def write_png(path: str | Path, img: np.ndarray) -> None:
 
 
 def write_tiff(path: str | Path, img: np.ndarray) -> None:
-    """Write an array (H, W) or (H, W, C) as TIFF atomically, dtype kept."""
+    """Write (H, W) or (H, W, C) as one TIFF page atomically, dtype kept.
+
+    Band-last arrays are written with contiguous samples (tifffile would otherwise make a 3-D
+    grey array into H pages of W x C), so GDAL, QGIS and ImageJ see H x W with C bands.
+    uint8 (H, W, 3) is written as RGB.
+    """
     import tifffile
 
+    a = np.ascontiguousarray(img)
+    kw: dict = {"photometric": "minisblack"}
+    if a.ndim == 3:
+        kw["planarconfig"] = "contig"
+        if a.shape[2] == 3 and a.dtype == np.uint8:
+            kw["photometric"] = "rgb"
     with atomic_path_suffixed(path) as tmp:
-        tifffile.imwrite(tmp, np.asarray(img), photometric="minisblack" if np.asarray(img).ndim == 2 or np.asarray(img).shape[-1] != 3 else "rgb")
+        tifffile.imwrite(tmp, a, **kw)
 
 
 @contextmanager
@@ -152,6 +182,7 @@ def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    _publish(tmp, is_dir=True)
     old = None
     if out.exists():
         old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))

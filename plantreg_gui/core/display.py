@@ -1,0 +1,359 @@
+"""Display rendering: any modality -> an (H, W, 3) uint8 RGB picture, plus case overlays and mosaics.
+
+Pure numpy / OpenCV / matplotlib colormap tables (no Qt), so the GUI, the CLI previews and the
+point-cloud colours all render the same way. Fast enough for interactive use on 4K images:
+statistics (percentiles, PCA) are computed on a subsample of at most ~1e6 pixels, colour maps
+are 256-entry lookup tables.
+
+Single-band images go through a colour map (thermal: diverging blue-white-red as in the paper;
+infrared grey; depth viridis), contrast stretched between two percentiles of the finite pixels.
+NaN (not mapped) pixels are drawn in :data:`BACKGROUND_RGB`. Three-band images are RGB (uint8
+as they are, others stretched with one pair of limits for all channels so hues are kept).
+Cubes with other band counts are shown as PCA false colour or as three chosen bands.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import Mapping, Sequence
+
+import cv2
+import numpy as np
+
+from .register import AREA_NAMES, CASE_NAMES
+
+#: Colour of pixels without a value (NaN): a neutral dark grey.
+BACKGROUND_RGB: tuple[int, int, int] = (28, 28, 28)
+
+#: Default colour map per modality (matplotlib names).
+DEFAULT_CMAPS: dict[str, str] = {
+    "thermal": "RdBu_r",        # diverging blue-white-red like the paper's thermal figures
+    "infrared": "gray",
+    "depth": "viridis",
+    "hyperspectral": "gray",    # a single band of a cube
+}
+
+_MODALITY_ALIASES = {
+    "ir": "infrared", "nir": "infrared", "tof": "infrared", "amplitude": "infrared",
+    "color": "rgb", "colour": "rgb", "bgr": "rgb",
+    "hsi": "hyperspectral", "multispectral": "hyperspectral", "spectral": "hyperspectral",
+    "temperature": "thermal", "lwir": "thermal",
+}
+
+#: Case-map overlay colours (code -> RGB), the paper's: P2 cyan, P3.1 yellow, P3.2 magenta;
+#: P5 orange (our choice); "outside the source" grey. P1 and P6 background have no overlay.
+CASE_COLOURS: dict[int, tuple[int, int, int]] = {
+    2: (0, 255, 255),      # P2 occluded
+    3: (255, 255, 0),      # P3.1 incoming uncertain
+    4: (255, 0, 255),      # P3.2 outgoing uncertain
+    5: (255, 140, 0),      # P5 uncertain area (no object behind)
+    6: (128, 128, 128),    # hit outside the source image / behind the source camera
+}
+#: Optional colour for P1 (off by default: legitimate pixels need no mark).
+P1_COLOUR: tuple[int, int, int] = (255, 255, 255)
+
+#: Area-map overlay colours: P4 green, P5 orange; P6 certain background has no overlay.
+AREA_COLOURS: dict[int, tuple[int, int, int]] = {
+    4: (0, 255, 0),        # P4 certain object
+    5: (255, 140, 0),      # P5 uncertain object area
+}
+
+#: Legend labels per code (the same names as :mod:`.register`).
+CASE_LABELS: dict[int, str] = dict(CASE_NAMES)
+AREA_LABELS: dict[int, str] = dict(AREA_NAMES)
+
+
+def legend(kind: str = "cases", colours: Mapping[int, tuple[int, int, int]] | None = None
+           ) -> list[tuple[int, str, tuple[int, int, int] | None]]:
+    """Legend entries ``(code, label, rgb or None for 'no overlay')`` for ``kind`` 'cases' or 'areas'."""
+    labels = CASE_LABELS if kind == "cases" else AREA_LABELS
+    colours = (CASE_COLOURS if kind == "cases" else AREA_COLOURS) if colours is None else colours
+    return [(c, labels[c], colours.get(c)) for c in sorted(labels)]
+
+
+def canonical_modality(modality: str | None) -> str:
+    m = (modality or "").strip().lower()
+    return _MODALITY_ALIASES.get(m, m)
+
+
+# ---------------------------------------------------------------------- statistics
+_MAX_SAMPLES = 1_000_000
+
+
+def _sample(values: np.ndarray, max_samples: int = _MAX_SAMPLES) -> np.ndarray:
+    """A strided subsample of a 1-D array (deterministic, so displays do not flicker)."""
+    step = max(1, int(np.ceil(values.shape[0] / max_samples)))
+    return values[::step]
+
+
+def _finite_values(img: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    """Finite values of ``img`` (H, W[, C]) under ``mask`` (H, W), flattened, subsampled."""
+    a = np.asarray(img)
+    if mask is not None:
+        a = a[np.asarray(mask, dtype=bool)]
+    else:
+        a = a.reshape(-1, *a.shape[2:]) if a.ndim > 2 else a.ravel()
+    a = _sample(a, max(1, _MAX_SAMPLES // (a.shape[1] if a.ndim == 2 else 1)))
+    a = a.ravel()
+    if a.dtype.kind == "f":
+        a = a[np.isfinite(a)]
+    return a
+
+
+def auto_limits(img: np.ndarray, percentiles: tuple[float, float] = (1, 99),
+                mask: np.ndarray | None = None) -> tuple[float, float]:
+    """Contrast limits ``(lo, hi)``: the given percentiles of the finite values of ``img``.
+
+    ``img`` (H, W) or (H, W, C) (all channels pooled); ``mask`` (H, W) bool restricts the
+    pixels. Returns ``(0, 1)`` when there is no finite value, and widens ``hi`` when all
+    values are equal so that callers never divide by zero.
+    """
+    v = _finite_values(img, mask)
+    if v.size == 0:
+        return 0.0, 1.0
+    lo, hi = np.percentile(v, [float(percentiles[0]), float(percentiles[1])])
+    lo, hi = float(lo), float(hi)
+    if not hi > lo:
+        hi = lo + max(1.0, abs(lo) * 1e-6)
+    return lo, hi
+
+
+# ---------------------------------------------------------------------- colour maps
+@lru_cache(maxsize=64)
+def colormap_lut(name: str) -> np.ndarray:
+    """(256, 3) uint8 lookup table of a matplotlib colour map."""
+    import matplotlib
+
+    cmap = matplotlib.colormaps[name]
+    return np.ascontiguousarray((cmap(np.linspace(0.0, 1.0, 256))[:, :3] * 255.0 + 0.5).astype(np.uint8))
+
+
+def _normalise_u8(img: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """Scale (H, W[, C]) to 0..255 uint8 between ``lo`` and ``hi``; also returns the NaN mask (H, W)."""
+    a = np.asarray(img, dtype=np.float32)
+    nan = None
+    if np.asarray(img).dtype.kind == "f":
+        bad = ~np.isfinite(a)
+        if bad.any():
+            nan = bad if a.ndim == 2 else bad.any(axis=2)
+    scale = 255.0 / (hi - lo)
+    # cv2.convertScaleAbs would fold negatives; do it in float, clip, cast (NaN -> 0, fixed below)
+    u = np.empty(a.shape, np.float32)
+    np.multiply(a, np.float32(scale), out=u)
+    u -= np.float32(lo * scale)
+    np.clip(u, 0.0, 255.0, out=u)
+    if nan is not None:
+        u[~np.isfinite(u)] = 0.0
+    return (u + 0.5).astype(np.uint8), nan
+
+
+def _apply_lut(u8: np.ndarray, lut: np.ndarray) -> np.ndarray:
+    """(H, W) uint8 indices -> (H, W, 3) uint8 through a (256, 3) table."""
+    # cv2.LUT on a 3-channel copy is ~4x faster than numpy fancy indexing on 4K frames
+    return cv2.LUT(cv2.merge([u8, u8, u8]), lut.reshape(256, 1, 3))
+
+
+def colorize(img: np.ndarray, cmap: str = "gray", limits: tuple[float, float] | None = None,
+             percentiles: tuple[float, float] = (1, 99), mask: np.ndarray | None = None) -> np.ndarray:
+    """Single band (H, W) -> (H, W, 3) uint8 through colour map ``cmap``; NaN -> background."""
+    lo, hi = limits if limits is not None else auto_limits(img, percentiles, mask)
+    if not hi > lo:
+        hi = lo + 1.0
+    u8, nan = _normalise_u8(img, float(lo), float(hi))
+    out = _apply_lut(u8, colormap_lut(cmap))
+    if nan is not None:
+        out[nan] = BACKGROUND_RGB
+    return out
+
+
+# ---------------------------------------------------------------------- multi-band
+def pca_scores(cube: np.ndarray, mask: np.ndarray | None = None, n: int = 3) -> np.ndarray:
+    """First ``n`` principal-component scores of a cube (H, W, B) -> (H, W, n) float32.
+
+    Components are fitted on the pixels whose bands are all finite (and inside ``mask``); the
+    sign of each component is fixed so that its largest loading is positive (a stable picture
+    for the same data). Pixels with any non-finite band get NaN scores.
+    """
+    cube = np.asarray(cube)
+    H, W, B = cube.shape
+    flat = cube.reshape(-1, B)
+    finite = np.isfinite(flat).all(axis=1) if cube.dtype.kind == "f" else np.ones(H * W, bool)
+    fit = finite if mask is None else finite & np.asarray(mask, dtype=bool).ravel()
+    idx = np.flatnonzero(fit)
+    out = np.full((H * W, n), np.nan, np.float32)
+    if idx.size < 2:
+        return out.reshape(H, W, n)
+    idx = _sample(idx, max(2000, _MAX_SAMPLES // max(B, 1)))
+    X = flat[idx].astype(np.float64)
+    mean = X.mean(axis=0)
+    X -= mean
+    # eigen-decomposition of the B x B covariance: cheap for B in the hundreds
+    cov = X.T @ X / max(len(X) - 1, 1)
+    w, V = np.linalg.eigh(cov)
+    V = V[:, np.argsort(w)[::-1][:n]]
+    signs = np.sign(V[np.argmax(np.abs(V), axis=0), np.arange(V.shape[1])])
+    V = V * np.where(signs == 0, 1.0, signs)
+    k = V.shape[1]
+    # one BLAS matmul over all pixels (NaN rows give NaN scores, as wanted); subtracting the
+    # projected mean afterwards avoids a centred copy of the whole cube
+    Vf = np.ascontiguousarray(V.astype(np.float32))
+    flat32 = flat if flat.dtype == np.float32 else flat.astype(np.float32)
+    out[:, :k] = flat32 @ Vf - (mean.astype(np.float32) @ Vf)
+    out[~finite] = np.nan
+    if k < n:
+        out[finite, k:] = 0.0
+    return out.reshape(H, W, n)
+
+
+def pca_false_colour(cube: np.ndarray, mask: np.ndarray | None = None,
+                     percentiles: tuple[float, float] = (1, 99)) -> np.ndarray:
+    """Cube (H, W, B) -> (H, W, 3) uint8: PC1 red, PC2 green, PC3 blue, each percentile-stretched.
+
+    NaN pixels (any band non-finite) are drawn in :data:`BACKGROUND_RGB`.
+    """
+    scores = pca_scores(cube, mask, 3)
+    return _stretch_channels(scores, percentiles, mask)
+
+
+def _stretch_channels(img: np.ndarray, percentiles: tuple[float, float], mask: np.ndarray | None,
+                      limits: Sequence[tuple[float, float]] | None = None) -> np.ndarray:
+    """(H, W, 3) -> uint8 with each channel stretched on its own; NaN pixels -> background."""
+    chans = []
+    nan_any = None
+    for c in range(3):
+        lo, hi = limits[c] if limits is not None else auto_limits(img[:, :, c], percentiles, mask)
+        u8, nan = _normalise_u8(img[:, :, c], lo, hi)
+        chans.append(u8)
+        if nan is not None:
+            nan_any = nan if nan_any is None else nan_any | nan
+    out = np.dstack(chans)
+    if nan_any is not None:
+        out[nan_any] = BACKGROUND_RGB
+    return out
+
+
+# ---------------------------------------------------------------------- the entry point
+def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = None,
+            limits: tuple[float, float] | None = None, percentiles: tuple[float, float] = (1, 99),
+            bands: tuple[int, int, int] | None = None, mask: np.ndarray | None = None) -> np.ndarray:
+    """Render any image for display: (H, W) or (H, W, C) -> (H, W, 3) uint8 RGB.
+
+    * single band: colour map ``cmap`` (default by ``modality``, see :data:`DEFAULT_CMAPS`),
+      limits ``limits`` or the ``percentiles`` of the finite pixels; for modality 'depth',
+      values <= 0 are "no measurement" and drawn like NaN;
+    * three bands (and ``bands`` not given): RGB; uint8 shown as it is, other dtypes stretched
+      with one pair of limits for all channels (keeps hues);
+    * four bands with modality 'rgb': RGBA, alpha dropped;
+    * other band counts: PCA false colour, or ``bands=(r, g, b)`` band indices, each stretched.
+
+    ``mask`` (H, W) bool selects the pixels the statistics are taken from (e.g. the object);
+    every pixel is still drawn. NaN pixels are drawn in :data:`BACKGROUND_RGB`.
+    """
+    a = np.asarray(img)
+    mod = canonical_modality(modality)
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[:, :, 0]
+    if a.ndim == 2:
+        if mod == "depth":
+            # depth 0 (or negative) means "no measurement", as in Recording.depth_m
+            a = a.astype(np.float32)
+            with np.errstate(invalid="ignore"):
+                a[~(a > 0)] = np.nan
+        name = cmap or DEFAULT_CMAPS.get(mod, "gray")
+        return colorize(a, name, limits, percentiles, mask)
+    if a.ndim != 3:
+        raise ValueError(f"expected an (H, W) or (H, W, C) image, got shape {a.shape}")
+    C = a.shape[2]
+    if bands is not None:
+        b = [int(i) for i in bands]
+        if len(b) != 3 or min(b) < -C or max(b) >= C:
+            raise ValueError(f"bands must be three indices into {C} bands, got {bands}")
+        sub = a[:, :, b]
+        return _stretch_channels(sub, percentiles, mask, None if limits is None else [limits] * 3)
+    if C == 4 and mod == "rgb":
+        a, C = a[:, :, :3], 3
+    if C == 3 and mod != "hyperspectral":
+        if a.dtype == np.uint8 and limits is None:
+            return np.ascontiguousarray(a)
+        lo, hi = limits if limits is not None else auto_limits(a, percentiles, mask)
+        u8, nan = _normalise_u8(a, lo, hi)
+        if nan is not None:
+            u8[nan] = BACKGROUND_RGB
+        return u8
+    if C == 2:
+        # no natural colour for two bands: show the first, as a single band
+        return colorize(a[:, :, 0], cmap or "gray", limits, percentiles, mask)
+    return pca_false_colour(a, mask, percentiles)
+
+
+# ---------------------------------------------------------------------- overlays and comparisons
+def overlay(base_rgb8: np.ndarray, codes: np.ndarray, colours: Mapping[int, tuple[int, int, int]],
+            opacity: float = 0.5) -> np.ndarray:
+    """Tint ``base_rgb8`` (H, W, 3) uint8 where ``codes`` (H, W) uint8 has a code in ``colours``.
+
+    Codes missing from ``colours`` (e.g. P1, P6) are left untouched. Returns a new array.
+    """
+    base = np.asarray(base_rgb8, dtype=np.uint8)
+    codes = np.asarray(codes)
+    if codes.shape != base.shape[:2]:
+        raise ValueError(f"codes {codes.shape} and image {base.shape[:2]} differ in size")
+    lut = np.zeros((256, 3), np.uint8)
+    has = np.zeros(256, bool)
+    for c, rgb in colours.items():
+        if rgb is not None:
+            lut[int(c)] = rgb
+            has[int(c)] = True
+    c8 = codes.astype(np.uint8, copy=False)
+    sel = has[c8]
+    op = float(np.clip(opacity, 0.0, 1.0))
+    out = base.copy()
+    if sel.any():
+        # whole-image blend + masked copy: faster than fancy indexing on 4K frames
+        tint = cv2.addWeighted(base, 1.0 - op, lut[c8], op, 0.0)
+        cv2.copyTo(tint, sel.view(np.uint8), out)
+    return out
+
+
+def mosaic(images: Sequence[np.ndarray], tile: int) -> np.ndarray:
+    """Tile alternating images as in the paper's mosaic figure: tile (i, j) shows image (i + j) mod n.
+
+    ``images`` all (H, W, 3) uint8 of one size; ``tile`` the tile edge in pixels. Tile (i, j)
+    covers rows ``i*tile .. (i+1)*tile - 1`` and columns ``j*tile .. (j+1)*tile - 1``.
+    """
+    if not images:
+        raise ValueError("mosaic needs at least one image")
+    shape = images[0].shape
+    for im in images:
+        if im.shape != shape:
+            raise ValueError(f"mosaic images differ in size: {im.shape} vs {shape}")
+    tile = max(1, int(tile))
+    n = len(images)
+    H, W = shape[:2]
+    out = np.array(images[0], copy=True)
+    if n == 1:
+        return out
+    # copy tile by tile (slices, no per-pixel masks): a few thousand views even on 4K
+    for i, r0 in enumerate(range(0, H, tile)):
+        for j, c0 in enumerate(range(0, W, tile)):
+            k = (i + j) % n
+            if k:
+                out[r0:r0 + tile, c0:c0 + tile] = images[k][r0:r0 + tile, c0:c0 + tile]
+    return out
+
+
+def checkerboard(a: np.ndarray, b: np.ndarray, tile: int) -> np.ndarray:
+    """Two images in a checkerboard of ``tile``-pixel squares (``a`` at the top-left)."""
+    return mosaic([a, b], tile)
+
+
+def blend(a: np.ndarray, b: np.ndarray, alpha: float) -> np.ndarray:
+    """``(1 - alpha) * a + alpha * b`` for uint8 images of one shape."""
+    if a.shape != b.shape:
+        raise ValueError(f"blend images differ in size: {a.shape} vs {b.shape}")
+    alpha = float(np.clip(alpha, 0.0, 1.0))
+    return cv2.addWeighted(np.asarray(a, np.uint8), 1.0 - alpha, np.asarray(b, np.uint8), alpha, 0.0)
+
+
+def default_tile(shape: tuple[int, ...]) -> int:
+    """A mosaic tile size that shows about 8 tiles along the shorter side (at least 8 px)."""
+    return max(8, int(round(min(shape[:2]) / 8)))

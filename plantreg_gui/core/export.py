@@ -1,0 +1,378 @@
+"""Write a registration result to an output folder (the layout ``plantreg register --out`` promises).
+
+```
+OUT/registered/<camera>.tif   float32, target H x W (x bands), NaN where not mapped
+OUT/registered/<camera>.png   display preview (colour map / PCA false colour, contrast stretched)
+OUT/cases/<camera>.png        uint8 case code per target pixel, every source camera
+OUT/areas.png                 uint8 area code per target pixel (4 = P4, 5 = P5, 6 = P6)
+OUT/pointcloud.ply            object-mesh hits (rig frame) with every camera's values + RGB colour
+OUT/mosaic.png                tiles alternating the modalities' previews
+OUT/summary.json              inputs, versions, parameters, case counts, timings
+```
+
+The folder is built under a temporary name beside ``OUT`` and moved into place at the end
+(:func:`~plantreg_gui.core.imageio.atomic_output_dir`), so a failed or cancelled export never
+leaves a complete-looking folder behind.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import platform
+import re
+import time
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from .. import __version__
+from . import display
+from .imageio import atomic_output_dir, atomic_path_suffixed, atomic_write_text, write_png, write_tiff
+from .progress import Reporter, ensure_reporter
+from .recording import Recording
+from .register import AREA_NAMES, CASE_NAMES, RegistrationResult
+from .rig import Rig
+
+SUMMARY_FORMAT = "plantreg.summary"
+SUMMARY_VERSION = 1
+
+#: Selectable parts of the output (``what``): float TIFFs, display PNGs, case maps, area map,
+#: point cloud, mosaic, summary.
+OUTPUTS = ("registered", "previews", "cases", "areas", "pointcloud", "mosaic", "summary")
+
+#: PLY vertex properties that are not camera values.
+_PLY_FIXED = ("x", "y", "z", "red", "green", "blue", "row", "col")
+
+
+def write_outputs(
+    result: RegistrationResult,
+    rig: Rig,
+    recording: Recording | None,
+    out: str | Path,
+    overwrite: bool = False,
+    progress: Reporter | None = None,
+    inputs: dict[str, Any] | None = None,
+    what: Iterable[str] | None = None,
+    display_options: Mapping[str, Mapping[str, Any]] | None = None,
+) -> Path:
+    """Write ``result`` into the folder ``out`` (layout in the module docstring); returns ``out``.
+
+    ``inputs`` adds to the provenance recorded in ``summary.json`` (e.g. ``{"rig": path}``; the
+    recording's own paths are added automatically). ``what`` selects a subset of
+    :data:`OUTPUTS` (default: all). ``display_options`` maps a camera name to keyword
+    arguments of :func:`display.to_rgb8` (cmap, limits, percentiles, bands) for the previews,
+    the mosaic and the point-cloud colours, so an export looks like the GUI's view.
+
+    Raises :class:`InputError` if ``out`` exists and is not empty and ``overwrite`` is False;
+    :class:`~plantreg_gui.core.errors.Cancelled` if cancelled through ``progress`` (nothing is
+    left at ``out`` then).
+    """
+    rep = ensure_reporter(progress)
+    sel = set(OUTPUTS) if what is None else set(what)
+    unknown = sel - set(OUTPUTS)
+    if unknown:
+        raise ValueError(f"unknown output parts {sorted(unknown)}; choose from {OUTPUTS}")
+    out = Path(out)
+    t_start = time.perf_counter()
+    timings: dict[str, float] = {}
+    cams = _camera_order(result, rig)
+    H, W = result.shape
+    opts = {k: dict(v) for k, v in (display_options or {}).items()}
+    written: list[str] = []
+    previews: dict[str, np.ndarray] = {}
+
+    def preview(cam: str) -> np.ndarray:
+        if cam not in previews:
+            previews[cam] = display.to_rgb8(result.registered[cam], modality=_modality(rig, cam),
+                                            **opts.get(cam, {}))
+        return previews[cam]
+
+    # steps with rough weights so the progress bar moves evenly
+    steps: list[tuple[str, float]] = []
+    if "registered" in sel:
+        steps += [(f"registered:{c}", 1.0 + 0.02 * _bands(result.registered[c])) for c in cams]
+    if "previews" in sel:
+        steps += [(f"previews:{c}", 1.0 + 0.01 * _bands(result.registered[c])) for c in cams]
+    if "cases" in sel:
+        steps += [(f"cases:{c}", 0.3) for c in result.cases]
+    if "areas" in sel:
+        steps.append(("areas", 0.3))
+    if "pointcloud" in sel:
+        steps.append(("pointcloud", 2.0 + 0.05 * sum(_bands(result.registered[c]) for c in cams)))
+    if "mosaic" in sel:
+        steps.append(("mosaic", 1.0))
+    total = sum(w for _, w in steps) or 1.0
+
+    with atomic_output_dir(out, overwrite) as tmp:
+        done = 0.0
+        for step, weight in steps:
+            kind, _, cam = step.partition(":")
+            rep(done / total, f"writing {_step_label(kind, cam)}")
+            t0 = time.perf_counter()
+            if kind == "registered":
+                rel = f"registered/{_safe(cam)}.tif"
+                write_tiff(tmp / rel, np.asarray(result.registered[cam], dtype=np.float32))
+            elif kind == "previews":
+                rel = f"registered/{_safe(cam)}.png"
+                write_png(tmp / rel, preview(cam))
+            elif kind == "cases":
+                rel = f"cases/{_safe(cam)}.png"
+                write_png(tmp / rel, np.asarray(result.cases[cam], dtype=np.uint8))
+            elif kind == "areas":
+                rel = "areas.png"
+                write_png(tmp / rel, np.asarray(result.area, dtype=np.uint8))
+            elif kind == "pointcloud":
+                rel = "pointcloud.ply"
+                colour_cam = _colour_camera(result, rig)
+                write_ply(tmp / rel, result, cams, preview(colour_cam), rep.sub(done / total, (done + weight) / total))
+            elif kind == "mosaic":
+                rel = "mosaic.png"
+                write_png(tmp / rel, display.mosaic([preview(c) for c in cams], display.default_tile((H, W))))
+            else:  # pragma: no cover - steps are built above
+                raise AssertionError(step)
+            timings[kind] = timings.get(kind, 0.0) + time.perf_counter() - t0
+            written.append(rel)
+            done += weight
+        if "summary" in sel:
+            rep(done / total, "writing summary.json")
+            timings["total"] = time.perf_counter() - t_start
+            summary = build_summary(result, rig, recording, inputs, export_timings=timings,
+                                    files=written + ["summary.json"])
+            atomic_write_text(tmp / "summary.json", json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        rep.check()  # a cancel during the last file still leaves nothing behind
+    if not rep.cancel.cancelled:  # the folder is complete now: a late cancel changes nothing
+        rep(1.0, f"wrote {out}")
+    return out
+
+
+# ---------------------------------------------------------------------- registered images
+# ---------------------------------------------------------------------- point cloud
+def ply_property_names(result: RegistrationResult, cams: list[str] | None = None) -> dict[str, list[str]]:
+    """Camera name -> its PLY property names (one per band: ``<cam>`` or ``<cam>_b000``...)."""
+    cams = list(result.registered) if cams is None else cams
+    used = set(_PLY_FIXED)
+    names: dict[str, list[str]] = {}
+    for cam in cams:
+        base = _ply_name(cam)
+        if base in used or base.lower() in used:
+            base = f"{base}_value"
+        b = _bands(result.registered[cam])
+        props = [base] if np.asarray(result.registered[cam]).ndim == 2 else [f"{base}_b{i:03d}" for i in range(b)]
+        props = [p if p not in used else f"{p}_{len(used)}" for p in props]
+        used.update(props)
+        names[cam] = props
+    return names
+
+
+def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | None = None,
+              colours_rgb8: np.ndarray | None = None, progress: Reporter | None = None) -> int:
+    """Write the object-mesh hits as a binary little-endian PLY; returns the number of points.
+
+    Vertex properties: ``x, y, z`` float32 (rig frame, metres); ``red, green, blue`` uchar from
+    ``colours_rgb8`` (H, W, 3) (a display rendering); ``row, col`` int32 (the target pixel);
+    per camera its registered value(s) as float32 (NaN where that camera is not mapped); per
+    source camera ``<cam>_case`` uchar (the case code). Points with NaN coordinates are dropped.
+    """
+    from plyfile import PlyData, PlyElement
+
+    rep = ensure_reporter(progress)
+    cams = list(result.registered) if cams is None else cams
+    pts = np.asarray(result.points_rig, dtype=np.float32)
+    H, W = result.shape
+    ok = np.isfinite(pts).all(axis=2)
+    rows, cols = np.nonzero(ok)
+    n = rows.size
+    names = ply_property_names(result, cams)
+    dtype: list[tuple[str, str]] = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
+                                    ("red", "u1"), ("green", "u1"), ("blue", "u1"),
+                                    ("row", "<i4"), ("col", "<i4")]
+    for cam in cams:
+        dtype += [(p, "<f4") for p in names[cam]]
+    used = {d[0] for d in dtype}
+    case_props: dict[str, str] = {}
+    for cam in result.cases:
+        p = f"{_ply_name(cam)}_case"
+        while p in used:
+            p += "_"
+        used.add(p)
+        case_props[cam] = p
+        dtype.append((p, "u1"))
+    v = np.empty(n, dtype=dtype)
+    sel = pts[rows, cols]
+    v["x"], v["y"], v["z"] = sel[:, 0], sel[:, 1], sel[:, 2]
+    if colours_rgb8 is not None:
+        c = np.asarray(colours_rgb8)[rows, cols]
+        v["red"], v["green"], v["blue"] = c[:, 0], c[:, 1], c[:, 2]
+    else:
+        v["red"] = v["green"] = v["blue"] = 200
+    v["row"], v["col"] = rows, cols
+    for k, cam in enumerate(cams):
+        rep(0.8 * k / max(len(cams), 1), f"point cloud: {cam}")
+        vals = np.asarray(result.registered[cam], dtype=np.float32)[rows, cols]
+        if vals.ndim == 1:
+            v[names[cam][0]] = vals
+        else:
+            for b, p in enumerate(names[cam]):
+                v[p] = vals[:, b]
+    for cam, p in case_props.items():
+        v[p] = np.asarray(result.cases[cam], dtype=np.uint8)[rows, cols]
+    rep(0.85, "point cloud: writing")
+    el = PlyElement.describe(v, "vertex")
+    with atomic_path_suffixed(path) as tmp:
+        PlyData([el], text=False, byte_order="<",
+                comments=[f"plantreg {__version__}: object-mesh hits of target '{result.target}' rays, "
+                          f"rig frame, metres; target image {W}x{H}"]).write(str(tmp))
+    return n
+
+
+# ---------------------------------------------------------------------- summary
+def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | None,
+                  inputs: Mapping[str, Any] | None = None, export_timings: Mapping[str, float] | None = None,
+                  files: list[str] | None = None) -> dict[str, Any]:
+    """The content of ``summary.json`` (JSON-ready dict)."""
+    H, W = result.shape
+    n = H * W
+    inp: dict[str, Any] = {}
+    if recording is not None and recording.folder is not None:
+        inp["recording"] = str(Path(recording.folder).resolve())
+        inp["images"] = {k: str(Path(p).resolve()) for k, p in recording.paths.items() if k != "depth"}
+        if "depth" in recording.paths:
+            inp["depth"] = str(Path(recording.paths["depth"]).resolve())
+    for k, val in (inputs or {}).items():
+        inp[k] = str(Path(val).resolve()) if isinstance(val, Path) else val
+    cases = {}
+    for cam, codes in result.cases.items():
+        counts = np.bincount(np.asarray(codes, dtype=np.uint8).ravel(), minlength=256)
+        cases[cam] = {CASE_NAMES[c]: {"code": c, "pixels": int(counts[c]), "percent": round(100.0 * counts[c] / n, 3)}
+                      for c in sorted(CASE_NAMES)}
+    acounts = np.bincount(np.asarray(result.area, dtype=np.uint8).ravel(), minlength=256)
+    areas = {AREA_NAMES[c]: {"code": c, "pixels": int(acounts[c]), "percent": round(100.0 * acounts[c] / n, 3)}
+             for c in sorted(AREA_NAMES)}
+    cameras = {}
+    for cam in _camera_order(result, rig):
+        reg = np.asarray(result.registered[cam])
+        mapped = np.isfinite(reg).all(axis=2) if reg.ndim == 3 else np.isfinite(reg)
+        c = _rig_camera(rig, cam)
+        cameras[cam] = {
+            "modality": c.modality if c is not None else None,
+            "size": [c.width, c.height] if c is not None else None,
+            "bands": _bands(reg),
+            "mapped_pixels": int(mapped.sum()),
+            "role": "target" if cam == result.target else "source",
+        }
+    n_points = int(np.isfinite(np.asarray(result.points_rig)).all(axis=2).sum())
+    return _jsonable({
+        "format": SUMMARY_FORMAT,
+        "version": SUMMARY_VERSION,
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "target": result.target,
+        "target_size": [W, H],
+        "inputs": inp,
+        "versions": _versions(),
+        "parameters": result.params.to_dict(),
+        "rig": {"depth_camera": rig.depth_camera, "depth_scale": rig.depth_scale,
+                "roi": {"min": rig.roi_min.tolist(), "max": rig.roi_max.tolist()}},
+        "cameras": cameras,
+        "cases": cases,
+        "areas": areas,
+        "points": n_points,
+        "timings": dict(result.timings),
+        "export_timings": dict(export_timings or {}),
+        "stats": dict(result.stats),
+        "case_codes": {str(k): v for k, v in CASE_NAMES.items()},
+        "area_codes": {str(k): v for k, v in AREA_NAMES.items()},
+        "files": list(files or []),
+    })
+
+
+def _versions() -> dict[str, str | None]:
+    import cv2
+
+    v: dict[str, str | None] = {"plantreg": __version__, "python": platform.python_version(),
+                                "numpy": np.__version__, "opencv": cv2.__version__}
+    for mod in ("open3d", "tifffile", "plyfile"):
+        try:
+            from importlib.metadata import version
+
+            v[mod] = version(mod)
+        except Exception:  # not installed / no metadata: record that, do not fail an export
+            v[mod] = None
+    return v
+
+
+def _jsonable(x: Any) -> Any:
+    """numpy scalars/arrays, Paths and tuples -> JSON types; NaN/inf -> None."""
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, np.generic):
+        return _jsonable(x.item())
+    if isinstance(x, float):
+        return x if np.isfinite(x) else None
+    if isinstance(x, Path):
+        return str(x)
+    if x is None or isinstance(x, (str, int, bool)):
+        return x
+    return str(x)
+
+
+# ---------------------------------------------------------------------- helpers
+def _safe(name: str) -> str:
+    """A camera name usable as a file name and PLY property (letters, digits, _ - .)."""
+    s = re.sub(r"[^A-Za-z0-9_.-]", "_", str(name))
+    return s or "camera"
+
+
+def _ply_name(name: str) -> str:
+    """A camera name as a PLY property name (letters, digits, _), not starting with a digit."""
+    s = re.sub(r"[^A-Za-z0-9_]", "_", str(name)) or "camera"
+    return s if not s[0].isdigit() else f"c{s}"
+
+
+def _bands(a: np.ndarray) -> int:
+    a = np.asarray(a)
+    return int(a.shape[2]) if a.ndim == 3 else 1
+
+
+def _rig_camera(rig: Rig, name: str):
+    for c in rig.cameras:
+        if c.name == name:
+            return c
+    return None
+
+
+def _modality(rig: Rig, name: str) -> str | None:
+    c = _rig_camera(rig, name)
+    return c.modality if c is not None else None
+
+
+def _camera_order(result: RegistrationResult, rig: Rig) -> list[str]:
+    """Target first, then the sources in rig order (cameras unknown to the rig last)."""
+    order = [result.target] if result.target in result.registered else []
+    order += [c for c in rig.names if c in result.registered and c not in order]
+    order += [c for c in result.registered if c not in order]
+    return order
+
+
+def _colour_camera(result: RegistrationResult, rig: Rig) -> str:
+    """The camera whose display rendering colours the point cloud: the rgb camera, else the target."""
+    for c in rig.cameras:
+        if display.canonical_modality(c.modality) == "rgb" and c.name in result.registered:
+            return c.name
+    if result.target in result.registered:
+        return result.target
+    return next(iter(result.registered))
+
+
+def _step_label(kind: str, cam: str) -> str:
+    return {"registered": f"registered/{cam}.tif", "previews": f"registered/{cam}.png",
+            "cases": f"cases/{cam}.png"}.get(kind, {"areas": "areas.png", "pointcloud": "pointcloud.ply",
+                                                     "mosaic": "mosaic.png"}.get(kind, kind))
+
+
+__all__ = ["OUTPUTS", "write_outputs", "write_ply", "build_summary", "ply_property_names"]
