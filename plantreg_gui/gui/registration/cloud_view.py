@@ -1,0 +1,236 @@
+"""3D view (pyvistaqt): the multimodal point cloud coloured by any modality, the object and
+uncertainty meshes, and point picking that reads out every modality at the picked point.
+
+The plotter is created lazily (the first time the view is shown) and touched only on the GUI
+thread; workers hand over numpy arrays (:class:`~.model.Cloud`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import (
+    QCheckBox, QComboBox, QHBoxLayout, QLabel, QSpinBox, QSplitter, QVBoxLayout, QWidget,
+)
+
+from .model import Cloud
+
+MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
+
+
+class CloudView(QWidget):
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.cloud: Cloud | None = None
+        self.meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self.plotter = None
+        self._poly = None
+        self._mesh_actors: dict[str, object] = {}
+        self._tree = None
+        self._dirty = False  # the scene needs rebuilding before the next render
+        self.picked_index: int | None = None
+        self._creating = False
+
+        self.colour = QComboBox()
+        self.colour.setToolTip("modality that colours the points")
+        self.point_size = QSpinBox()
+        self.point_size.setRange(1, 12)
+        self.point_size.setValue(3)
+        self.mesh_boxes: dict[str, QCheckBox] = {}
+        top = QHBoxLayout()
+        top.addWidget(QLabel("Colour by"))
+        top.addWidget(self.colour)
+        top.addWidget(QLabel("Point size"))
+        top.addWidget(self.point_size)
+        for name in MESH_COLOURS:
+            cb = QCheckBox(f"Show {name}")
+            cb.setEnabled(False)
+            cb.toggled.connect(self._mesh_toggled)
+            self.mesh_boxes[name] = cb
+            top.addWidget(cb)
+        top.addStretch(1)
+        self.hint = QLabel("Left-click a point to read all its values.")
+        top.addWidget(self.hint)
+
+        self.host = QWidget()
+        self.host_layout = QVBoxLayout(self.host)
+        self.host_layout.setContentsMargins(0, 0, 0, 0)
+        self.placeholder = QLabel("No point cloud yet.")
+        self.placeholder.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.host_layout.addWidget(self.placeholder)
+        self.info = QLabel("")
+        self.info.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.info.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
+        self.info.setWordWrap(True)
+        self.info.setMinimumWidth(240)
+        self.info.setStyleSheet("font-family: monospace; font-size: 11px;")
+        split = QSplitter(Qt.Orientation.Horizontal)
+        split.addWidget(self.host)
+        split.addWidget(self.info)
+        split.setStretchFactor(0, 1)
+        split.setChildrenCollapsible(False)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(2, 2, 2, 2)
+        lay.addLayout(top)
+        lay.addWidget(split, 1)
+        self.colour.currentIndexChanged.connect(self._recolour)
+        self.point_size.valueChanged.connect(self._resize_points)
+
+    # ------------------------------------------------------------------ data
+    def set_cloud(self, cloud: Cloud | None, meshes: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
+                  default: str | None = None, note: str = "") -> None:
+        """``cloud`` points and per-modality colours; ``meshes[name]`` = (vertices (V, 3), triangles (T, 3))."""
+        self.cloud = cloud
+        self.meshes = {k: v for k, v in (meshes or {}).items() if v is not None and len(v[1])}
+        keep = self.colour.currentText()
+        self.colour.blockSignals(True)
+        self.colour.clear()
+        if cloud is not None:
+            self.colour.addItems(list(cloud.colours))
+            if keep in cloud.colours:
+                self.colour.setCurrentText(keep)
+            elif default in cloud.colours:
+                self.colour.setCurrentText(default)
+        self.colour.blockSignals(False)
+        for name, cb in self.mesh_boxes.items():
+            cb.setEnabled(name in self.meshes)
+            if name not in self.meshes:
+                cb.setChecked(False)
+        self._tree = None
+        self.picked_index = None
+        n = 0 if cloud is None else len(cloud.points)
+        self.info.setText((note + "\n\n" if note else "") + f"{n:,} points." if cloud is not None else note)
+        self._dirty = True
+        if self.plotter is not None and self.isVisible():
+            self.render_now()
+
+    # ------------------------------------------------------------------ plotter
+    def ensure_plotter(self) -> None:
+        if self.plotter is not None or self._creating:
+            return
+        from pyvistaqt import QtInteractor
+
+        # constructing the GL widget processes events; a nested render request must not build a second one
+        self._creating = True
+        try:
+            plotter = QtInteractor(self.host)
+        finally:
+            self._creating = False
+        self.plotter = plotter
+        self.placeholder.hide()
+        self.host_layout.addWidget(self.plotter.interactor)
+        self.plotter.set_background("#202428", top="#3a4450")
+        self.plotter.add_axes(color="white")  # orientation of the rig frame (x right, y down, z forward)
+        try:
+            self.plotter.enable_point_picking(callback=self._picked, show_message=False, left_clicking=True,
+                                              show_point=True, color="red", point_size=12)
+        except TypeError:  # older pyvista without some keywords
+            self.plotter.enable_point_picking(callback=self._picked, show_message=False)
+        self._dirty = True
+
+    def render_now(self) -> None:
+        """Build the scene if needed and render (GUI thread only)."""
+        if self.cloud is None and not self.meshes:
+            return
+        self.ensure_plotter()
+        if self.plotter is None:
+            return
+        if self._dirty:
+            self._rebuild()
+        self.plotter.render()
+
+    def _rebuild(self) -> None:
+        import pyvista as pv
+
+        p = self.plotter
+        p.clear_actors()
+        self._mesh_actors.clear()
+        self._poly = None
+        if self.cloud is not None and len(self.cloud.points):
+            poly = pv.PolyData(np.asarray(self.cloud.points, dtype=np.float32))
+            poly.point_data["colour"] = self._colours()
+            self._poly = poly
+            p.add_mesh(poly, scalars="colour", rgb=True, point_size=self.point_size.value(),
+                       render_points_as_spheres=False, name="cloud", pickable=True)
+        for name, (verts, tris) in self.meshes.items():
+            faces = np.hstack([np.full((len(tris), 1), 3, np.int64), np.asarray(tris, np.int64)]).ravel()
+            mesh = pv.PolyData(np.asarray(verts, np.float32), faces)
+            actor = p.add_mesh(mesh, color=MESH_COLOURS[name], opacity=0.35, name=name, pickable=False,
+                               show_edges=False)
+            actor.SetVisibility(self.mesh_boxes[name].isChecked())
+            self._mesh_actors[name] = actor
+        if not self._dirty_camera_kept():
+            self._reset_camera()
+        self._dirty = False
+
+    def _dirty_camera_kept(self) -> bool:
+        return getattr(self, "_camera_set", False)
+
+    def _reset_camera(self) -> None:
+        """An oblique view from above and to the side, "up" towards the rig (the rig frame has
+        y down and z towards the ground), so that the heights of leaves are visible."""
+        pts = self.cloud.points if self.cloud is not None and len(self.cloud.points) else None
+        if pts is None:
+            self.plotter.reset_camera()
+            return
+        c = np.nanmedian(pts, axis=0).astype(float)
+        ext = float(np.nanmax(np.nanpercentile(pts, 98, axis=0) - np.nanpercentile(pts, 2, axis=0)))
+        d = np.array([0.3, 0.6, -1.0])
+        d /= np.linalg.norm(d)
+        up = np.array([0.0, 0.0, -1.0])
+        up -= d * (up @ d)
+        self.plotter.camera_position = [tuple(c + d * 2.0 * max(ext, 0.05)), tuple(c), tuple(up / np.linalg.norm(up))]
+        self.plotter.reset_camera()  # keeps the direction, fits the whole cloud
+        self.plotter.camera.zoom(1.15)
+        self._camera_set = True
+
+    def _colours(self) -> np.ndarray:
+        name = self.colour.currentText()
+        if self.cloud is None or name not in self.cloud.colours:
+            return np.full((0 if self.cloud is None else len(self.cloud.points), 3), 200, np.uint8)
+        return np.ascontiguousarray(self.cloud.colours[name], dtype=np.uint8)
+
+    def _recolour(self) -> None:
+        if self._poly is not None:
+            self._poly.point_data["colour"] = self._colours()
+            self.plotter.render()
+
+    def _resize_points(self, v: int) -> None:
+        if self.plotter is not None and self._poly is not None:
+            actor = self.plotter.actors.get("cloud")
+            if actor is not None:
+                actor.GetProperty().SetPointSize(v)
+                self.plotter.render()
+
+    def _mesh_toggled(self) -> None:
+        for name, actor in self._mesh_actors.items():
+            actor.SetVisibility(self.mesh_boxes[name].isChecked())
+        if self.plotter is not None:
+            self.plotter.render()
+
+    # ------------------------------------------------------------------ picking
+    def _picked(self, point) -> None:
+        if point is None:
+            return
+        self.pick(np.asarray(point, dtype=np.float64))
+
+    def pick(self, xyz: np.ndarray) -> int | None:
+        """Show the values of the cloud point nearest to ``xyz`` (3,); returns its index."""
+        if self.cloud is None or not len(self.cloud.points):
+            return None
+        if self._tree is None:
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(self.cloud.points)
+        _, i = self._tree.query(np.asarray(xyz, dtype=np.float64).reshape(3))
+        self.picked_index = int(i)
+        self.info.setText(self.cloud.point_text(int(i)))
+        return int(i)
+
+    # ------------------------------------------------------------------ teardown
+    def close_plotter(self) -> None:
+        if self.plotter is not None:
+            try:
+                self.plotter.close()
+            finally:
+                self.plotter = None

@@ -1,0 +1,145 @@
+"""Per-modality display controls: colour map, contrast limits by percentile, and for cubes PCA
+false colour or three chosen bands. Emits the new settings; the workspace re-renders."""
+
+from __future__ import annotations
+
+from PySide6.QtCore import QTimer, Signal
+from PySide6.QtWidgets import (
+    QComboBox, QDoubleSpinBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QSpinBox, QVBoxLayout, QWidget,
+)
+
+from ...core.display import DEFAULT_CMAPS, canonical_modality
+from .model import COLORMAPS, DisplaySettings, Layer
+
+
+class DisplayControls(QGroupBox):
+    """``changed(name, settings)`` after the user edits a modality's settings (throttled 80 ms)."""
+
+    changed = Signal(str, object)
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__("Display", parent)
+        self.settings: dict[str, DisplaySettings] = {}
+        self.layers: dict[str, Layer] = {}
+        self.layer = QComboBox()
+        self.cmap = QComboBox()
+        self.cmap.addItem("default", None)
+        for c in COLORMAPS:
+            self.cmap.addItem(c, c)
+        self.lo = QDoubleSpinBox()
+        self.hi = QDoubleSpinBox()
+        for sb, v in ((self.lo, 1.0), (self.hi, 99.0)):
+            sb.setRange(0.0, 100.0)
+            sb.setDecimals(1)
+            sb.setSingleStep(0.5)
+            sb.setSuffix(" %")
+            sb.setValue(v)
+        self.mode = QComboBox()
+        self.mode.addItem("PCA false colour", "pca")
+        self.mode.addItem("three bands (R, G, B)", "bands")
+        self.bands = [QSpinBox() for _ in range(3)]
+        bl = QHBoxLayout()
+        for sb in self.bands:
+            sb.setRange(0, 0)
+            bl.addWidget(sb)
+        self.band_row = QWidget()
+        self.band_row.setLayout(bl)
+        bl.setContentsMargins(0, 0, 0, 0)
+        self.info = QLabel("")
+        self.info.setWordWrap(True)
+        self.info.setStyleSheet("color: #555; font-size: 11px;")
+
+        form = QFormLayout()
+        form.addRow("Modality", self.layer)
+        form.addRow("Colour map", self.cmap)
+        lim = QHBoxLayout()
+        lim.addWidget(self.lo)
+        lim.addWidget(QLabel("–"))
+        lim.addWidget(self.hi)
+        form.addRow("Limits (percentiles)", lim)
+        form.addRow("Cube as", self.mode)
+        form.addRow("Bands", self.band_row)
+        lay = QVBoxLayout(self)
+        lay.addLayout(form)
+        lay.addWidget(self.info)
+
+        self._timer = QTimer(self)
+        self._timer.setSingleShot(True)
+        self._timer.setInterval(80)
+        self._timer.timeout.connect(self._emit)
+        self.layer.currentIndexChanged.connect(self._show_layer)
+        for w in (self.cmap, self.mode):
+            w.currentIndexChanged.connect(self._edited)
+        for sb in (self.lo, self.hi, *self.bands):
+            sb.valueChanged.connect(self._edited)
+        self._loading = False
+        self.setEnabled(False)
+
+    # ------------------------------------------------------------------ state
+    def set_layers(self, layers: list[Layer]) -> None:
+        self.layers = {L.name: L for L in layers}
+        for L in layers:
+            self.settings.setdefault(L.name, DisplaySettings())
+        keep = self.layer.currentText()
+        self.layer.blockSignals(True)
+        self.layer.clear()
+        self.layer.addItems([L.name for L in layers])
+        if keep in self.layers:
+            self.layer.setCurrentText(keep)
+        self.layer.blockSignals(False)
+        self.setEnabled(bool(layers))
+        self._show_layer()
+
+    def settings_for(self, name: str) -> DisplaySettings:
+        return self.settings.get(name, DisplaySettings())
+
+    def _show_layer(self) -> None:
+        L = self.layers.get(self.layer.currentText())
+        if L is None:
+            return
+        s = self.settings_for(L.name)
+        self._loading = True
+        is_cube = L.bands > 3 or (L.bands == 3 and canonical_modality(L.modality) == "hyperspectral")
+        single = L.bands == 1
+        self.cmap.setEnabled(single)
+        i = self.cmap.findData(s.cmap) if s.cmap else 0
+        self.cmap.setCurrentIndex(max(i, 0))
+        self.lo.setValue(s.percentiles[0])
+        self.hi.setValue(s.percentiles[1])
+        self.mode.setEnabled(is_cube)
+        self.mode.setCurrentIndex(1 if s.bands is not None else 0)
+        for k, sb in enumerate(self.bands):
+            sb.setRange(0, max(L.bands - 1, 0))
+            default = (0, L.bands // 2, L.bands - 1)[k] if is_cube else 0
+            sb.setValue(s.bands[k] if s.bands is not None else default)
+        self.band_row.setEnabled(is_cube and s.bands is not None)
+        default_cmap = DEFAULT_CMAPS.get(canonical_modality(L.modality), "gray")
+        unit = f", {L.unit}" if L.unit else ""
+        kind = f"{L.bands} bands" if L.bands > 1 else f"single band, default map {default_cmap}"
+        self.info.setText(f"{L.name}: {L.modality}{unit}, {kind}")
+        self._loading = False
+
+    def _edited(self) -> None:
+        if self._loading:
+            return
+        name = self.layer.currentText()
+        if name not in self.layers:
+            return
+        lo, hi = self.lo.value(), self.hi.value()
+        if hi <= lo:
+            hi = min(100.0, lo + 0.5)
+        bands = tuple(sb.value() for sb in self.bands) if self.mode.currentData() == "bands" else None
+        self.band_row.setEnabled(bands is not None)
+        self.settings[name] = DisplaySettings(self.cmap.currentData(), (lo, hi), bands)
+        self._timer.start()
+
+    def _emit(self) -> None:
+        name = self.layer.currentText()
+        self.changed.emit(name, self.settings_for(name))
+
+    # for tests and scripted use
+    def apply(self, name: str, settings: DisplaySettings) -> None:
+        self.settings[name] = settings
+        if self.layer.currentText() == name:
+            self._show_layer()
+        self.changed.emit(name, settings)

@@ -1,0 +1,73 @@
+"""Export dialog: choose a folder and the parts to write; the workspace runs
+:func:`plantreg_gui.core.export.write_outputs` on a worker."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtWidgets import (
+    QCheckBox, QDialog, QDialogButtonBox, QFileDialog, QGroupBox, QHBoxLayout, QLabel, QLineEdit,
+    QPushButton, QVBoxLayout, QWidget,
+)
+
+#: output part (core.export.OUTPUTS) -> label shown to the user
+PARTS = {
+    "registered": "Registered images (float32 TIFF, NaN = not mapped)",
+    "previews": "Display previews (PNG, as shown here)",
+    "cases": "Case masks per source (PNG, codes 0-6)",
+    "areas": "Area mask of the target (PNG, codes 4-6)",
+    "pointcloud": "Point cloud with every modality's values (PLY)",
+    "mosaic": "Mosaic of all modalities (PNG)",
+    "summary": "Summary: inputs, parameters, case counts, timings (JSON)",
+}
+
+
+def folder_is_nonempty(path: str | Path) -> bool:
+    p = Path(path)
+    return p.exists() and (not p.is_dir() or any(p.iterdir()))
+
+
+class ExportDialog(QDialog):
+    def __init__(self, folder: str | Path = "", parent: QWidget | None = None):
+        super().__init__(parent)
+        self.setWindowTitle("Export registration")
+        self.folder = QLineEdit(str(folder))
+        self.folder.setMinimumWidth(420)
+        browse = QPushButton("Browse…")
+        browse.clicked.connect(self._browse)
+        row = QHBoxLayout()
+        row.addWidget(QLabel("Folder"))
+        row.addWidget(self.folder, 1)
+        row.addWidget(browse)
+        box = QGroupBox("Write")
+        bl = QVBoxLayout(box)
+        self.boxes: dict[str, QCheckBox] = {}
+        for key, label in PARTS.items():
+            cb = QCheckBox(label)
+            cb.setChecked(True)
+            self.boxes[key] = cb
+            bl.addWidget(cb)
+        note = QLabel("The folder is written under a temporary name and moved into place when complete. "
+                      "An existing, non-empty folder is replaced only after you confirm.")
+        note.setWordWrap(True)
+        note.setStyleSheet("color: #555;")
+        self.buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Ok | QDialogButtonBox.StandardButton.Cancel)
+        self.buttons.button(QDialogButtonBox.StandardButton.Ok).setText("Export")
+        self.buttons.accepted.connect(self.accept)
+        self.buttons.rejected.connect(self.reject)
+        lay = QVBoxLayout(self)
+        lay.addLayout(row)
+        lay.addWidget(box)
+        lay.addWidget(note)
+        lay.addWidget(self.buttons)
+
+    def _browse(self) -> None:
+        d = QFileDialog.getExistingDirectory(self, "Export folder", self.folder.text() or str(Path.home()))
+        if d:
+            self.folder.setText(d)
+
+    def out(self) -> Path:
+        return Path(self.folder.text()).expanduser()
+
+    def what(self) -> list[str]:
+        return [k for k, cb in self.boxes.items() if cb.isChecked()]

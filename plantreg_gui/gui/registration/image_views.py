@@ -1,0 +1,333 @@
+"""Image views: a fast QGraphicsView for uint8 renderings, linked pan/zoom/cursor, a spectrum plot.
+
+An :class:`ImageView` shows an (H, W, 3) uint8 array as a QImage pixmap (plus an optional
+RGBA overlay and a crosshair). Views in one :class:`ViewLink` share zoom, scroll position and
+cursor, as 3D Slicer's linked compare views do. Scene coordinates are image pixels with pixel
+centres at integer + 0.5 (Qt's pixmap corner convention): pixel (row, col) = floor(y), floor(x).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
+from PySide6.QtGui import QColor, QImage, QPainter, QPen, QTransform
+from PySide6.QtWidgets import (
+    QFrame, QGraphicsItem, QGraphicsLineItem, QGraphicsScene, QGraphicsView, QGridLayout, QLabel,
+    QSizePolicy, QVBoxLayout, QWidget,
+)
+
+
+def qimage_from_rgb8(rgb: np.ndarray) -> QImage:
+    """(H, W, 3) uint8 -> QImage (RGB888), a deep copy so the array can go away."""
+    a = np.ascontiguousarray(rgb, dtype=np.uint8)
+    h, w = a.shape[:2]
+    if a.ndim == 3 and a.shape[2] == 4:
+        return QImage(a.data, w, h, 4 * w, QImage.Format.Format_RGBA8888).copy()
+    return QImage(a.data, w, h, 3 * w, QImage.Format.Format_RGB888).copy()
+
+
+def rgb8_from_qimage(img: QImage) -> np.ndarray:
+    """QImage -> (H, W, 3) uint8 (for tests and exports)."""
+    img = img.convertToFormat(QImage.Format.Format_RGB888)
+    h, w, bpl = img.height(), img.width(), img.bytesPerLine()
+    buf = np.frombuffer(img.constBits(), dtype=np.uint8, count=h * bpl).reshape(h, bpl)
+    return buf[:, : 3 * w].reshape(h, w, 3).copy()
+
+
+class ImageItem(QGraphicsItem):
+    """Draws a QImage as it is. (A QGraphicsPixmapItem would convert it to the screen's pixel
+    format, e.g. 16-bit on some X servers, and lose the exact colours.)"""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.image = QImage()
+
+    def set_image(self, img: QImage) -> None:
+        self.prepareGeometryChange()
+        self.image = img
+        self.update()
+
+    def boundingRect(self) -> QRectF:  # noqa: N802
+        return QRectF(0, 0, self.image.width(), self.image.height())
+
+    def paint(self, painter: QPainter, option, widget=None) -> None:
+        if not self.image.isNull():
+            painter.drawImage(QPointF(0, 0), self.image)
+
+
+class ImageView(QGraphicsView):
+    """Shows one rendering; wheel zooms about the mouse, drag pans, double-click fits.
+
+    Signals: ``hovered(row, col)`` image pixel under the mouse (-1, -1 when outside).
+    """
+
+    hovered = Signal(int, int)
+    zoomed = Signal(object)  # QTransform
+
+    def __init__(self, title: str = "", parent: QWidget | None = None):
+        super().__init__(parent)
+        self.title = title
+        self.setScene(QGraphicsScene(self))
+        self.setBackgroundBrush(QColor(40, 40, 40))
+        self.setDragMode(QGraphicsView.DragMode.ScrollHandDrag)
+        self.setTransformationAnchor(QGraphicsView.ViewportAnchor.AnchorUnderMouse)
+        self.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform, False)
+        self.setMouseTracking(True)
+        self.setFrameShape(QFrame.Shape.NoFrame)
+        self.setMinimumSize(120, 100)
+        self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
+        self._pix = ImageItem()
+        self._over = ImageItem()
+        self._over.setZValue(1)
+        self.scene().addItem(self._pix)
+        self.scene().addItem(self._over)
+        pen = QPen(QColor(255, 60, 60, 220))
+        pen.setCosmetic(True)
+        pen.setWidth(1)
+        self._hline = QGraphicsLineItem()
+        self._vline = QGraphicsLineItem()
+        for ln in (self._hline, self._vline):
+            ln.setPen(pen)
+            ln.setZValue(2)
+            ln.setVisible(False)
+            self.scene().addItem(ln)
+        self.array: np.ndarray | None = None       # the (H, W, 3) uint8 shown
+        self.overlay: np.ndarray | None = None     # the (H, W, 4) uint8 overlay shown
+        self._auto_fit = True
+        self.home_rect: QRectF | None = None  # what "fit" shows (e.g. the object's bounding box)
+
+    # ---------------------------------------------------------------- content
+    def set_rgb8(self, rgb: np.ndarray) -> None:
+        first = self.array is None or self.array.shape[:2] != rgb.shape[:2]
+        self.array = rgb
+        self._pix.set_image(qimage_from_rgb8(rgb))
+        h, w = rgb.shape[:2]
+        self.scene().setSceneRect(QRectF(0, 0, w, h))
+        self._hline.setLine(0, 0, w, 0)
+        self._vline.setLine(0, 0, 0, h)
+        if first:
+            self._auto_fit = True
+            self.fit()
+
+    def set_overlay(self, rgba: np.ndarray | None) -> None:
+        self.overlay = rgba
+        self._over.set_image(QImage() if rgba is None else qimage_from_rgb8(rgba))
+
+    def displayed(self) -> np.ndarray | None:
+        """What the image item holds, read back from Qt, (H, W, 3) uint8."""
+        img = self._pix.image
+        return None if img.isNull() else rgb8_from_qimage(img)
+
+    def clear(self) -> None:
+        self.array = None
+        self._pix.set_image(QImage())
+        self.set_overlay(None)
+
+    # ---------------------------------------------------------------- cursor, zoom
+    def set_cursor_pixel(self, row: int, col: int) -> None:
+        """Draw the crosshair through the centre of pixel (row, col); hide it for (-1, -1)."""
+        show = row >= 0 and col >= 0 and self.array is not None
+        self._hline.setVisible(show)
+        self._vline.setVisible(show)
+        if show:
+            self._hline.setPos(0, row + 0.5)
+            self._vline.setPos(col + 0.5, 0)
+
+    def set_home(self, rect: QRectF | None) -> None:
+        """The region that fitting (start, double-click) shows; None = the whole image."""
+        self.home_rect = rect
+        self._auto_fit = True
+        self.fit()
+
+    def fit(self) -> None:
+        if self.array is not None:
+            r = self.home_rect if self.home_rect is not None else self.scene().sceneRect()
+            self.fitInView(r, Qt.AspectRatioMode.KeepAspectRatio)
+
+    def resizeEvent(self, e) -> None:  # noqa: N802
+        super().resizeEvent(e)
+        if self._auto_fit:
+            self.fit()
+
+    def mouseDoubleClickEvent(self, e) -> None:  # noqa: N802
+        self._auto_fit = True
+        self.fit()
+        self.zoomed.emit(self.transform())
+
+    def wheelEvent(self, e) -> None:  # noqa: N802
+        steps = e.angleDelta().y() / 120.0
+        if steps == 0:
+            return
+        self.zoom_by(1.25 ** steps)
+
+    def zoom_by(self, factor: float) -> None:
+        self._auto_fit = False
+        self.scale(factor, factor)
+        self.zoomed.emit(self.transform())
+
+    def apply_transform(self, t: QTransform) -> None:
+        self._auto_fit = False
+        if t != self.transform():
+            self.setTransform(t)
+
+    def mouseMoveEvent(self, e) -> None:  # noqa: N802
+        super().mouseMoveEvent(e)
+        p = self.mapToScene(e.position().toPoint())
+        self.hover_scene(p)
+
+    def hover_scene(self, p: QPointF) -> None:
+        if self.array is None:
+            return
+        h, w = self.array.shape[:2]
+        col, row = int(np.floor(p.x())), int(np.floor(p.y()))
+        if 0 <= row < h and 0 <= col < w:
+            self.hovered.emit(row, col)
+        else:
+            self.hovered.emit(-1, -1)
+
+    def leaveEvent(self, e) -> None:  # noqa: N802
+        super().leaveEvent(e)
+        self.hovered.emit(-1, -1)
+
+
+class ViewLink:
+    """Links views' zoom, scroll and cursor (all views show images of one pixel grid)."""
+
+    def __init__(self) -> None:
+        self.views: list[ImageView] = []
+
+    def add(self, v: ImageView) -> None:
+        self.views.append(v)
+        v.zoomed.connect(lambda t, src=v: self._zoom(src, t))
+        # setValue with an unchanged value emits nothing, so this cannot loop
+        v.horizontalScrollBar().valueChanged.connect(lambda val, src=v: self._scroll(src, val, True))
+        v.verticalScrollBar().valueChanged.connect(lambda val, src=v: self._scroll(src, val, False))
+
+    def clear(self) -> None:
+        self.views.clear()
+
+    def _zoom(self, src: ImageView, t: QTransform) -> None:
+        c = src.mapToScene(src.viewport().rect().center())
+        for v in self.views:
+            if v is not src:
+                v.apply_transform(t)
+                v.centerOn(c)
+
+    def _scroll(self, src: ImageView, val: int, horizontal: bool) -> None:
+        if src._auto_fit:
+            return
+        for v in self.views:
+            if v is not src:
+                (v.horizontalScrollBar() if horizontal else v.verticalScrollBar()).setValue(val)
+
+    def set_cursor(self, row: int, col: int) -> None:
+        for v in self.views:
+            v.set_cursor_pixel(row, col)
+
+
+class TitledView(QWidget):
+    """An ImageView with a caption above it."""
+
+    def __init__(self, title: str, parent: QWidget | None = None):
+        super().__init__(parent)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(2, 2, 2, 2)
+        lay.setSpacing(1)
+        self.label = QLabel(title)
+        self.label.setStyleSheet("font-weight: bold;")
+        self.view = ImageView(title)
+        lay.addWidget(self.label)
+        lay.addWidget(self.view, 1)
+
+
+class ViewGrid(QWidget):
+    """A grid of titled image views, one per layer; optionally linked."""
+
+    hovered = Signal(str, int, int)  # (layer name, row, col)
+
+    def __init__(self, linked: bool, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.linked = linked
+        self.link = ViewLink()
+        self.grid = QGridLayout(self)
+        self.grid.setContentsMargins(0, 0, 0, 0)
+        self.grid.setSpacing(4)
+        self.views: dict[str, TitledView] = {}
+
+    def set_layers(self, names: list[str], titles: dict[str, str]) -> None:
+        if list(self.views) == names:
+            for n in names:
+                self.views[n].label.setText(titles.get(n, n))
+            return
+        for tv in self.views.values():
+            self.grid.removeWidget(tv)
+            tv.deleteLater()
+        self.views.clear()
+        self.link.clear()
+        n = len(names)
+        cols = 1 if n <= 1 else 2 if n <= 4 else 3
+        for i, name in enumerate(names):
+            tv = TitledView(titles.get(name, name))
+            self.views[name] = tv
+            self.grid.addWidget(tv, i // cols, i % cols)
+            tv.view.hovered.connect(lambda r, c, nm=name: self.hovered.emit(nm, r, c))
+            if self.linked:
+                self.link.add(tv.view)
+
+    def set_image(self, name: str, rgb: np.ndarray) -> None:
+        self.views[name].view.set_rgb8(rgb)
+
+    def set_cursor(self, row: int, col: int) -> None:
+        if self.linked:
+            self.link.set_cursor(row, col)
+
+    def set_home(self, rect: QRectF | None) -> None:
+        for tv in self.views.values():
+            tv.view.set_home(rect)
+
+
+class SpectrumPlot(QWidget):
+    """The spectrum of the pixel under the cursor (matplotlib), redrawn at most every 60 ms."""
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
+        from matplotlib.figure import Figure
+
+        self.figure = Figure(figsize=(4, 1.6), dpi=90, layout="constrained")
+        self.canvas = FigureCanvasQTAgg(self.figure)
+        self.ax = self.figure.add_subplot(111)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addWidget(self.canvas)
+        self.setMinimumHeight(150)
+        self._line = None
+        self._pending: tuple | None = None
+        self.current: np.ndarray | None = None
+        self._timer = QTimer(self)
+        self._timer.setSingleShot(True)
+        self._timer.setInterval(60)
+        self._timer.timeout.connect(self._draw)
+        self.set_spectrum(None, None, "move the cursor over the hyperspectral image")
+
+    def set_spectrum(self, values: np.ndarray | None, wavelengths: np.ndarray | None, title: str) -> None:
+        self.current = values
+        self._pending = (values, wavelengths, title)
+        if not self._timer.isActive():
+            self._timer.start()
+
+    def _draw(self) -> None:
+        if self._pending is None:
+            return
+        values, wl, title = self._pending
+        self._pending = None
+        ax = self.ax
+        ax.clear()
+        ax.set_title(title, fontsize=8)
+        ax.tick_params(labelsize=7)
+        if values is not None and np.any(np.isfinite(values)):
+            x = wl if wl is not None else np.arange(values.size)
+            ax.plot(x, values, color="#2a7f2a", lw=1.2)
+            ax.set_xlabel("wavelength (nm)" if wl is not None else "band", fontsize=7)
+            ax.set_ylabel("value", fontsize=7)
+        self.canvas.draw_idle()

@@ -1,0 +1,199 @@
+"""Mask overlays: a source camera's case map and the target's area map over a registered image,
+each toggleable (per code too), with opacity and a legend in the paper's colours with counts."""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtGui import QBrush, QColor
+from PySide6.QtWidgets import (
+    QAbstractItemView, QCheckBox, QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QHeaderView, QLabel,
+    QSlider, QSplitter, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
+)
+
+from ...core import display
+from ...core.register import AREA_NAMES, CASE_NAMES
+from .image_views import ImageView
+from .model import case_table
+
+
+class Legend(QTableWidget):
+    """Rows: [x] colour  name | count | %. Unchecking a row hides that code's overlay."""
+
+    changed = Signal()
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(0, 3, parent)
+        self.setHorizontalHeaderLabels(["class", "pixels", "%"])
+        self.verticalHeader().setVisible(False)
+        self.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.setSelectionMode(QAbstractItemView.SelectionMode.NoSelection)
+        hh = self.horizontalHeader()
+        hh.setSectionResizeMode(0, QHeaderView.ResizeMode.Stretch)
+        hh.setSectionResizeMode(1, QHeaderView.ResizeMode.ResizeToContents)
+        hh.setSectionResizeMode(2, QHeaderView.ResizeMode.ResizeToContents)
+        self.codes: list[int] = []
+        self.counts: dict[int, int] = {}
+        self.itemChanged.connect(lambda _i: self.changed.emit())
+
+    def set_rows(self, rows: list[tuple[int, str, object, int, float]]) -> None:
+        enabled = self.enabled_codes() if self.codes else None
+        self.blockSignals(True)
+        self.setRowCount(len(rows))
+        self.codes = [r[0] for r in rows]
+        self.counts = {r[0]: r[3] for r in rows}
+        for i, (code, name, rgb, count, pct) in enumerate(rows):
+            it = QTableWidgetItem(name)
+            it.setFlags(Qt.ItemFlag.ItemIsEnabled | Qt.ItemFlag.ItemIsUserCheckable)
+            on = rgb is not None and (enabled is None or code in enabled)
+            it.setCheckState(Qt.CheckState.Checked if on else Qt.CheckState.Unchecked)
+            if rgb is not None:
+                it.setData(Qt.ItemDataRole.DecorationRole, QColor(*rgb))
+            else:
+                it.setFlags(Qt.ItemFlag.ItemIsEnabled)
+                it.setForeground(QBrush(QColor(110, 110, 110)))
+                it.setToolTip("no overlay (as in the paper)")
+            self.setItem(i, 0, it)
+            c = QTableWidgetItem(f"{count:,}")
+            c.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
+            self.setItem(i, 1, c)
+            p = QTableWidgetItem(f"{pct:.1f}")
+            p.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
+            self.setItem(i, 2, p)
+        self.blockSignals(False)
+        self.resizeRowsToContents()
+        h = self.horizontalHeader().height() + sum(self.rowHeight(i) for i in range(self.rowCount())) + 4
+        self.setFixedHeight(h)
+
+    def enabled_codes(self) -> set[int]:
+        return {c for i, c in enumerate(self.codes)
+                if self.item(i, 0) is not None and self.item(i, 0).checkState() == Qt.CheckState.Checked}
+
+
+class MasksView(QWidget):
+    hovered = Signal(str, int, int)
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.renders: dict[str, np.ndarray] = {}
+        self.cases: dict[str, np.ndarray] = {}
+        self.area: np.ndarray | None = None
+        self.target = ""
+        self.view = ImageView("masks")
+        self.view.hovered.connect(lambda r, c: self.hovered.emit("masks", r, c))
+
+        self.base = QComboBox()
+        self.base.setToolTip("the registered image under the overlays")
+        self.source = QComboBox()
+        self.source.setToolTip("the source camera whose case map is shown")
+        self.show_cases = QCheckBox("Case map (per source)")
+        self.show_cases.setChecked(True)
+        self.show_areas = QCheckBox("Area map (target)")
+        self.opacity = QSlider(Qt.Orientation.Horizontal)
+        self.opacity.setRange(0, 100)
+        self.opacity.setValue(60)
+        self.case_legend = Legend()
+        self.area_legend = Legend()
+
+        form = QFormLayout()
+        form.addRow("Image", self.base)
+        form.addRow("Source", self.source)
+        form.addRow("Opacity", self.opacity)
+        g1 = QGroupBox("Projection cases of the source")
+        l1 = QVBoxLayout(g1)
+        l1.addWidget(self.show_cases)
+        l1.addWidget(self.case_legend)
+        g2 = QGroupBox("Target areas")
+        l2 = QVBoxLayout(g2)
+        l2.addWidget(self.show_areas)
+        l2.addWidget(self.area_legend)
+        self.note = QLabel("Rows without a colour have no overlay (P1, P6), as in the paper. P2: occluded in the "
+                           "source; P3.1/P3.2: the depth camera cannot see there; %: of all target pixels.")
+        self.note.setWordWrap(True)
+        self.note.setStyleSheet("color: #555; font-size: 11px;")
+        side = QWidget()
+        sl = QVBoxLayout(side)
+        sl.setContentsMargins(4, 0, 4, 0)
+        sl.addLayout(form)
+        sl.addWidget(g1)
+        sl.addWidget(g2)
+        sl.addWidget(self.note)
+        sl.addStretch(1)
+        side.setMinimumWidth(330)
+        side.setMaximumWidth(420)
+
+        split = QSplitter(Qt.Orientation.Horizontal)
+        split.addWidget(self.view)
+        split.addWidget(side)
+        split.setStretchFactor(0, 1)
+        split.setStretchFactor(1, 0)
+        split.setChildrenCollapsible(False)
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(2, 2, 2, 2)
+        lay.addWidget(split)
+
+        self._source_chosen = False
+        self.source.currentIndexChanged.connect(self._source_changed)
+        self.source.activated.connect(lambda _i: setattr(self, "_source_chosen", True))
+        for w in (self.base,):
+            w.currentIndexChanged.connect(self.update_view)
+        for w in (self.show_cases, self.show_areas):
+            w.toggled.connect(self.update_view)
+        self.opacity.valueChanged.connect(self.update_view)
+        self.case_legend.changed.connect(self.update_view)
+        self.area_legend.changed.connect(self.update_view)
+
+    def set_data(self, target: str, renders: dict[str, np.ndarray], order: list[str],
+                 cases: dict[str, np.ndarray], area: np.ndarray) -> None:
+        """``renders`` display renderings in the target grid; ``cases[source]`` (H, W) uint8 case
+        codes; ``area`` (H, W) uint8 area codes."""
+        self.target, self.renders, self.cases, self.area = target, renders, cases, area
+        for combo, items, keep in ((self.base, [n for n in order if n in renders], self.base.currentText()),
+                                   (self.source, list(cases), self.source.currentText())):
+            combo.blockSignals(True)
+            combo.clear()
+            combo.addItems(items)
+            if keep in items:
+                combo.setCurrentText(keep)
+            combo.blockSignals(False)
+        self.area_legend.set_rows(case_table(area, AREA_NAMES, display.AREA_COLOURS))
+        if self.source.count() and not self._source_chosen:
+            # start with the source that has the most occluded/uncertain pixels: the one worth checking
+            worst = max(cases, key=lambda n: int(np.isin(cases[n], (2, 3, 4)).sum()))
+            self.source.blockSignals(True)
+            self.source.setCurrentText(worst)
+            self.source.blockSignals(False)
+        self._source_changed()
+
+    def set_source(self, name: str) -> None:
+        self._source_chosen = True
+        self.source.setCurrentText(name)
+
+    def _source_changed(self) -> None:
+        src = self.source.currentText()
+        if src in self.cases:
+            self.case_legend.set_rows(case_table(self.cases[src], CASE_NAMES, display.CASE_COLOURS))
+        self.update_view()
+
+    def composite(self) -> np.ndarray | None:
+        base = self.renders.get(self.base.currentText())
+        if base is None:
+            return None
+        op = self.opacity.value() / 100.0
+        # the base is dimmed to grey so the overlay colours read clearly
+        out = np.repeat(np.asarray(base.mean(axis=2, keepdims=True), dtype=np.uint8), 3, axis=2)
+        if self.show_areas.isChecked() and self.area is not None:
+            on = self.area_legend.enabled_codes()
+            out = display.overlay(out, self.area, {c: v for c, v in display.AREA_COLOURS.items() if c in on}, op)
+        src = self.source.currentText()
+        if self.show_cases.isChecked() and src in self.cases:
+            on = self.case_legend.enabled_codes()
+            out = display.overlay(out, self.cases[src], {c: v for c, v in display.CASE_COLOURS.items() if c in on}, op)
+        return out
+
+    def update_view(self) -> None:
+        img = self.composite()
+        if img is None:
+            self.view.clear()
+        else:
+            self.view.set_rgb8(img)

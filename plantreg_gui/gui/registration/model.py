@@ -1,0 +1,209 @@
+"""What the registration workspace shows, computed without Qt.
+
+The widgets only display what this module computes: display renderings of images (through
+:func:`plantreg_gui.core.display.to_rgb8`, the same rendering as the CLI previews), read-outs
+of every modality at a pixel in its units, and the multimodal point cloud as arrays. Keeping it
+Qt-free means it can be tested headless and used on a worker thread.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ...core import display
+from ...core.display import canonical_modality
+
+DEPTH = "depth"  # pseudo-modality: z of the hit point (registered) or the raw depth map
+
+#: colour maps offered in the display controls (matplotlib names)
+COLORMAPS = ["gray", "viridis", "magma", "inferno", "RdBu_r", "coolwarm", "bwr", "jet", "turbo"]
+
+
+@dataclass
+class DisplaySettings:
+    """How one modality is drawn. ``cmap`` None = the modality's default (thermal RdBu_r,
+    infrared gray, depth viridis); ``bands`` None = PCA false colour for cubes."""
+
+    cmap: str | None = None
+    percentiles: tuple[float, float] = (1.0, 99.0)
+    bands: tuple[int, int, int] | None = None
+
+    def with_(self, **kw: Any) -> "DisplaySettings":
+        return replace(self, **kw)
+
+
+def render(img: np.ndarray, modality: str, settings: DisplaySettings | None = None) -> np.ndarray:
+    """Any image (H, W[, C]) -> (H, W, 3) uint8, as the core renders it for previews."""
+    s = settings or DisplaySettings()
+    bands = s.bands
+    if bands is not None and (img.ndim != 3 or img.shape[2] <= 3 and canonical_modality(modality) != "hyperspectral"):
+        bands = None
+    return display.to_rgb8(img, modality=modality, cmap=s.cmap, percentiles=s.percentiles, bands=bands)
+
+
+def unit_of(modality: str) -> str:
+    m = canonical_modality(modality)
+    return {"thermal": "°C", DEPTH: "mm"}.get(m, "")
+
+
+def format_value(v: float, modality: str) -> str:
+    if not np.isfinite(v):
+        return "—"
+    m = canonical_modality(modality)
+    if m == "thermal":
+        return f"{v:.2f} °C"
+    if m == DEPTH:
+        return f"{v:.1f} mm"
+    if abs(v) >= 1000 or float(v).is_integer():
+        return f"{v:.0f}"
+    return f"{v:.4g}"
+
+
+@dataclass
+class Layer:
+    """One displayable image: a camera's (raw or registered) image or the depth."""
+
+    name: str
+    modality: str
+    data: np.ndarray                          # (H, W) or (H, W, B)
+    wavelengths: np.ndarray | None = None     # (B,) nm, for cubes when known
+    unit: str = ""
+
+    @property
+    def bands(self) -> int:
+        return 1 if self.data.ndim == 2 else int(self.data.shape[2])
+
+    def value_text(self, row: int, col: int, band: int | None = None) -> str:
+        h, w = self.data.shape[:2]
+        if not (0 <= row < h and 0 <= col < w):
+            return "—"
+        px = self.data[row, col]
+        if self.data.ndim == 2:
+            return format_value(float(px), self.modality)
+        if self.bands == 3 and canonical_modality(self.modality) != "hyperspectral":
+            if not np.all(np.isfinite(px.astype(np.float64))):
+                return "—"
+            return "(" + ", ".join(format_value(float(v), self.modality) for v in px) + ")"
+        b = 0 if band is None else int(np.clip(band, 0, self.bands - 1))
+        v = float(px[b])
+        where = f"{self.wavelengths[b]:.0f} nm" if self.wavelengths is not None else f"band {b}"
+        return f"{format_value(v, self.modality)} @ {where} ({self.bands} bands)"
+
+    def spectrum(self, row: int, col: int) -> np.ndarray | None:
+        """(B,) values of a cube at a pixel, None for images with at most 3 bands."""
+        if self.data.ndim != 3 or self.bands <= 3:
+            return None
+        h, w = self.data.shape[:2]
+        if not (0 <= row < h and 0 <= col < w):
+            return None
+        return np.asarray(self.data[row, col], dtype=np.float64)
+
+
+def wavelengths_of(camera: Any, bands: int) -> np.ndarray | None:
+    """Band centres (nm) from a camera's extra rig keys (``wavelengths``/``wavelengths_nm``), if any."""
+    extra = getattr(camera, "extra", {}) or {}
+    for key in ("wavelengths_nm", "wavelengths", "bands_nm", "bands"):
+        w = extra.get(key)
+        if w is not None:
+            w = np.asarray(w, dtype=np.float64).ravel()
+            if w.size == bands:
+                return w
+    return None
+
+
+def registered_layers(result: Any, rig: Any) -> list[Layer]:
+    """The layers of a registration result in the target grid: every camera's registered
+    image (target first) and the depth (z of the hit point, mm)."""
+    layers = []
+    names = list(result.registered)
+    names.sort(key=lambda n: (n != result.target, rig.names.index(n) if n in rig.names else 99))
+    for name in names:
+        cam = rig.camera(name) if name in rig.names else None
+        data = result.registered[name]
+        mod = cam.modality if cam is not None else name
+        layers.append(Layer(name, mod, data, wavelengths_of(cam, data.shape[2]) if data.ndim == 3 else None,
+                            unit_of(mod)))
+    z_mm = np.asarray(result.points_rig[..., 2], dtype=np.float32) * np.float32(1000.0)
+    layers.append(Layer(DEPTH, DEPTH, z_mm, None, "mm"))
+    return layers
+
+
+def raw_layers(rig: Any | None, recording: Any) -> list[Layer]:
+    """The recording's raw images (depth first, in mm when the rig gives the scale)."""
+    layers = []
+    if recording.depth is not None:
+        scale = rig.depth_scale if rig is not None else 0.001
+        d = recording.depth.astype(np.float32) * np.float32(scale * 1000.0)
+        d[~(d > 0)] = np.nan
+        layers.append(Layer(DEPTH, DEPTH, d, None, "mm"))
+    for name, img in recording.images.items():
+        cam = None
+        if rig is not None and name in rig.names:
+            cam = rig.camera(name)
+        mod = cam.modality if cam is not None else _guess_modality(name, img)
+        wl = wavelengths_of(cam, img.shape[2]) if (cam is not None and img.ndim == 3) else None
+        layers.append(Layer(name, mod, img, wl, unit_of(mod)))
+    return layers
+
+
+def _guess_modality(name: str, img: np.ndarray) -> str:
+    n = name.lower()
+    for key, mod in (("therm", "thermal"), ("ir", "infrared"), ("infra", "infrared"), ("hs", "hyperspectral"),
+                     ("rgb", "rgb"), ("colo", "rgb")):
+        if key in n:
+            return mod
+    if img.ndim == 3 and img.shape[2] > 4:
+        return "hyperspectral"
+    return "rgb" if img.ndim == 3 else "gray"
+
+
+@dataclass
+class Cloud:
+    """The multimodal point cloud of a registration: ``points`` (N, 3) rig frame metres,
+    ``pixels`` (N,) flat target pixel index of each point, ``colours[name]`` (N, 3) uint8 (the
+    display rendering of every layer, so 2D and 3D look the same), ``values[name]`` (N,) or
+    (N, B) raw values for picking."""
+
+    points: np.ndarray
+    pixels: np.ndarray
+    colours: dict[str, np.ndarray] = field(default_factory=dict)
+    values: dict[str, np.ndarray] = field(default_factory=dict)
+    modalities: dict[str, str] = field(default_factory=dict)
+
+    def point_text(self, i: int) -> str:
+        p = self.points[i]
+        lines = [f"point {i}: x={p[0]*1000:.1f} y={p[1]*1000:.1f} z={p[2]*1000:.1f} mm (rig frame)"]
+        for name, v in self.values.items():
+            if v.ndim == 1:
+                lines.append(f"{name}: {format_value(float(v[i]), self.modalities.get(name, name))}")
+            elif v.shape[1] == 3:
+                lines.append(f"{name}: (" + ", ".join(f"{float(x):.4g}" for x in v[i]) + ")")
+            else:
+                lines.append(f"{name}: {v.shape[1]} bands, mean {float(np.nanmean(v[i])):.4g}")
+        return "\n".join(lines)
+
+
+def build_cloud(points_hw3: np.ndarray, layers: list[Layer], renders: dict[str, np.ndarray]) -> Cloud:
+    """Points with a finite position (from (H, W, 3)) and their per-layer colours/values."""
+    flat = points_hw3.reshape(-1, 3)
+    pix = np.flatnonzero(np.all(np.isfinite(flat), axis=1))
+    cloud = Cloud(np.ascontiguousarray(flat[pix], dtype=np.float32), pix)
+    for L in layers:
+        if L.data.shape[:2] != points_hw3.shape[:2]:
+            continue
+        v = L.data.reshape(L.data.shape[0] * L.data.shape[1], -1)[pix]
+        cloud.values[L.name] = v[:, 0] if v.shape[1] == 1 else v
+        cloud.modalities[L.name] = L.modality
+        if L.name in renders:
+            cloud.colours[L.name] = np.ascontiguousarray(renders[L.name].reshape(-1, 3)[pix])
+    return cloud
+
+
+def case_table(codes: np.ndarray, names: dict[int, str], colours: dict[int, Any]) -> list[tuple[int, str, Any, int, float]]:
+    """Legend rows ``(code, name, rgb or None, count, percent)`` for every named code."""
+    counts = np.bincount(np.asarray(codes, dtype=np.uint8).ravel(), minlength=256)
+    total = max(int(codes.size), 1)
+    return [(c, names[c], colours.get(c), int(counts[c]), 100.0 * counts[c] / total) for c in sorted(names)]
