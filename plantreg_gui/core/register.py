@@ -1,6 +1,17 @@
 """Registration engine: depth mesh -> target rays -> source cameras -> registered images + cases.
 
-CONTRACT (filled in by the registration-engine work; signatures are binding for the GUI/CLI).
+Method (Stumpe et al.; details and the edge-cut geometry in :mod:`.mesh`, user documentation in
+``docs/registration.md``):
+
+1. Object mesh from the depth map (ROI crop, back-projection through the depth camera's
+   intrinsics and distortion, 8-neighbourhood triangulation, edge cut), and the uncertainty
+   mesh: the object mesh's boundary edges extruded along the depth camera's rays to the ground.
+2. Target rays through the undistorted target pixel centres are cast once into both meshes
+   (Open3D ``RaycastingScene``); the first object-mesh hit is the pixel's 3D point.
+3. For every source camera the point is projected through the source's distortion model; a ray
+   from the *source camera centre* towards the point (never from the surface, which would hit
+   itself) tests for occlusion by the object mesh and for passing through the uncertainty mesh.
+4. Values are sampled bilinearly from the raw source image at the projected position.
 
 Case codes per target pixel and source camera (``cases[source]``, uint8):
   0 = P6 certain background (target ray hits neither mesh)
@@ -11,16 +22,31 @@ Case codes per target pixel and source camera (``cases[source]``, uint8):
   5 = P5 uncertain object area with no object-mesh hit behind
   6 = hit outside the source image or behind the source camera
 Area codes (target only, ``area``): 4 = P4 certain object, 5 = P5 uncertain object area, 6 = P6 background.
+
+Precedence when several apply to an object hit: 6 > 2 > 3 > 4 > 1. Outside the source (6) there is
+no value at all; a certain occlusion (2) is a statement about *measured* geometry and means the
+value is wrong, so it outranks mere uncertainty; incoming uncertainty (3) puts the target point
+itself in doubt (for every source) and so outranks outgoing uncertainty (4), which concerns only
+this source's view of an otherwise certain point. "Before" means by more than ``occlusion_tol_m``
+(object mesh) or ``uncertainty_tol_m`` (uncertainty mesh), so that a surface does not occlude
+itself and the boundary edge shared by both meshes does not count.
 """
 
 from __future__ import annotations
 
+import hashlib
+import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
-from .progress import Reporter
+from .camera import Camera
+from .errors import InputError
+from .mesh import TriMesh, extend_boundary, object_mesh, uncertainty_mesh
+from .progress import Reporter, ensure_reporter
+from .raycast import RAY_CHUNK, MeshScene, pixel_rays_cam, pixel_rays_rig, project_points
 from .recording import Recording
 from .rig import Rig
 
@@ -40,9 +66,16 @@ class RegistrationParams:
     occlusion_tol_m: float = 0.002      # a source-ray hit this much before the point counts as occluding
     roi_min: np.ndarray | None = None   # override the rig's ROI (3,) metres
     roi_max: np.ndarray | None = None
+    uncertainty_tol_m: float = 0.002    # an uncertainty-mesh hit this much before the point counts (P3.1, P3.2)
+    boundary_px: float = 0.5            # skirt around the object mesh's boundary, depth pixels (0 = none)
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
+
+    def roi(self, rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+        lo = rig.roi_min if self.roi_min is None else np.asarray(self.roi_min, dtype=np.float64)
+        hi = rig.roi_max if self.roi_max is None else np.asarray(self.roi_max, dtype=np.float64)
+        return lo, hi
 
 
 @dataclass
@@ -75,23 +108,435 @@ class RegistrationResult:
                 for cam, c in self.cases.items()}
 
 
+# ---------------------------------------------------------------------------- sampling
+#: Result arrays in this size range are allocated from a plain anonymous mapping (see nan_array).
+_PLAIN_PAGES_BYTES = (64 << 20, 1 << 30)
+
+
+def nan_array(shape: tuple[int, ...]) -> np.ndarray:
+    """``np.full(shape, nan, float32)``; arrays of 64 MB .. 1 GB come from a plain anonymous ``mmap``.
+
+    Why: numpy asks the kernel for transparent huge pages on large allocations; where the kernel
+    compacts memory on demand for them (``defrag = madvise``, a common default) the first touch
+    of a fresh result stalls while it assembles 2 MB pages -- measured here 0.6-0.8 s for the
+    300 MB of a 204-band cube registered into the 640x576 infrared view, against 0.15 s with
+    ordinary pages. For multi-gigabyte results (the same cube in a 4K view: 6.8 GB) the number of
+    page faults dominates instead, and huge pages are the faster choice (measured 5-18 s vs 18-22 s).
+    """
+    n = int(np.prod(shape))
+    lo, hi = _PLAIN_PAGES_BYTES
+    if not lo <= n * 4 <= hi:
+        return np.full(shape, np.nan, dtype=np.float32)
+    import mmap
+
+    buf = mmap.mmap(-1, n * 4)
+    a = np.frombuffer(buf, dtype=np.float32, count=n).reshape(shape)
+    a.fill(np.nan)
+    return a
+
+
+def _sample_chunk_rows(n_channels: int) -> int:
+    # ~64 MB of float32 output per chunk
+    return int(min(RAY_CHUNK, max(1 << 14, (64 << 20) // (4 * max(1, n_channels)))))
+
+
+def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None = None, *,
+                    out: np.ndarray | None = None, rows: np.ndarray | None = None) -> np.ndarray:
+    """Bilinear samples of ``image`` (h, w) or (h, w, C), any dtype, at pixel positions ``uv``
+    (N, 2) (pixel centres at integers) -> (N,) or (N, C) float32. NaN rows of ``uv`` give NaN.
+
+    With ``out`` (M, C) float32 and ``rows`` (N,), sample i is written to ``out[rows[i]]``
+    instead (rows with NaN ``uv`` are left as they are) and ``out`` is returned.
+
+    Positions in the half-pixel border of the image take the edge pixel's value (clamped).
+    Exact (no fixed-point weights as in ``cv2.remap``, which also handles at most 4 channels).
+    Pixel-interleaved images with a few channels are gathered directly; with many channels
+    (BIP hyperspectral cubes) a sparse (N x h*w) interpolation matrix multiplies the (h*w, C)
+    cube, reading each pixel's spectrum contiguously; band-sequential cubes (ENVI BSQ loads as a
+    (h, w, C) view of a (C, h, w) array) are gathered a few bands at a time so that each band
+    stays in cache. No copy of the cube is made in either layout.
+    """
+    progress = ensure_reporter(progress)
+    img = np.asarray(image)
+    h, w = img.shape[:2]
+    if img.ndim > 3:
+        img = img.reshape(h, w, -1)
+    C = 1 if img.ndim == 2 else img.shape[2]
+    band_first = C > 1 and img.transpose(2, 0, 1).flags.c_contiguous and not img.flags.c_contiguous
+    if band_first:
+        planes = img.transpose(2, 0, 1).reshape(C, h * w)
+    else:
+        flat = np.ascontiguousarray(img).reshape(h * w, C)
+        if C > 4 and flat.dtype != np.float32:
+            flat = flat.astype(np.float32)  # once, not per chunk (scipy would convert the whole cube)
+    uv = np.asarray(uv)
+    n = len(uv)
+    squeeze = out is None and C == 1
+    if out is None:
+        out = np.full((n, C), np.nan, dtype=np.float32)
+        rows_all = np.arange(n)
+    else:
+        out = out.reshape(len(out), C)
+        rows_all = np.asarray(rows)
+    ok = np.flatnonzero(np.isfinite(uv).all(axis=1))
+    step = _sample_chunk_rows(C)
+    du = 1 if w > 1 else 0
+    dv = w if h > 1 else 0
+    for a in range(0, len(ok), step):
+        progress(a / max(1, len(ok)))
+        sel = ok[a : a + step]
+        u = np.clip(uv[sel, 0].astype(np.float64), 0, w - 1)
+        v = np.clip(uv[sel, 1].astype(np.float64), 0, h - 1)
+        u0 = np.minimum(np.floor(u), max(w - 2, 0)).astype(np.int64)
+        v0 = np.minimum(np.floor(v), max(h - 2, 0)).astype(np.int64)
+        fu = (u - u0).astype(np.float32)
+        fv = (v - v0).astype(np.float32)
+        i00 = v0 * w + u0
+        w00, w01 = (1 - fu) * (1 - fv), fu * (1 - fv)
+        w10, w11 = (1 - fu) * fv, fu * fv
+        dst = rows_all[sel]
+        if band_first:
+            idx = np.stack([i00, i00 + du, i00 + dv, i00 + dv + du])  # (4, m)
+            wts = np.stack([w00, w01, w10, w11])
+            acc = np.empty((C, len(sel)), dtype=np.float32)
+            for b0 in range(0, C, 4):
+                blk = planes[b0 : b0 + 4]  # a few bands: ~1 MB each, kept in cache for the 4 gathers
+                g = np.take(blk, idx, axis=1).astype(np.float32, copy=False)  # (nb, 4, m)
+                acc[b0 : b0 + 4] = np.einsum("bkm,km->bm", g, wts)
+            out[dst] = acc.T
+            continue
+        if C <= 4:
+            acc = flat[i00].astype(np.float32) * w00[:, None]
+            acc += flat[i00 + du] * w01[:, None]
+            acc += flat[i00 + dv] * w10[:, None]
+            acc += flat[i00 + dv + du] * w11[:, None]
+        else:
+            import scipy.sparse as sp
+
+            m = len(sel)
+            cols = np.stack([i00, i00 + du, i00 + dv, i00 + dv + du], axis=1).ravel()
+            wts = np.stack([w00, w01, w10, w11], axis=1).ravel()
+            M = sp.csr_matrix((wts, cols, np.arange(0, 4 * m + 1, 4)), shape=(m, h * w))
+            acc = M @ flat
+        out[dst] = acc
+    return out[:, 0] if squeeze else out
+
+
+# ---------------------------------------------------------------------------- mesh helpers
+@dataclass
+class Meshes:
+    """Object and uncertainty mesh of one depth map, with their ray-casting scenes."""
+
+    object: TriMesh
+    uncertainty: TriMesh
+    object_scene: MeshScene
+    uncertainty_scene: MeshScene
+
+
+def build_meshes(rig: Rig, depth_m: np.ndarray, params: RegistrationParams | None = None,
+                 rays_cam: np.ndarray | None = None, progress: Reporter | None = None,
+                 timings: dict[str, float] | None = None) -> Meshes:
+    """Object mesh + uncertainty mesh + scenes of depth map ``depth_m`` (H, W metres, NaN = none)."""
+    params = params or RegistrationParams()
+    progress = ensure_reporter(progress)
+    timings = {} if timings is None else timings
+    dcam = rig.depth()
+    lo, hi = params.roi(rig)
+    with _stage(progress, timings, "mesh", 0.0, 0.7):
+        obj = object_mesh(dcam, depth_m, lo, hi, params.edge_angle_deg, rays_cam)
+        obj = extend_boundary(obj, dcam, params.boundary_px, depth_m)
+        obj_scene = MeshScene(obj.vertices, obj.triangles)
+    with _stage(progress, timings, "uncertainty mesh", 0.7, 1.0):
+        unc = uncertainty_mesh(obj, dcam.center_rig, float(hi[2]))
+        unc_scene = MeshScene(unc.vertices, unc.triangles)
+    return Meshes(obj, unc, obj_scene, unc_scene)
+
+
+@contextmanager
+def _stage(progress: Reporter, timings: dict[str, float], name: str, start: float, end: float) -> Iterator[None]:
+    """Report ``name`` at ``start`` (a cancellation point), time it into ``timings``, report ``end``."""
+    progress(start, name)
+    t0 = time.perf_counter()
+    try:
+        yield
+    finally:
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
+    progress(end, name)
+
+
+def _segment_dirs(origin: np.ndarray, points: np.ndarray, stop_before_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Directions (N, 3) float32 from ``origin`` (3,) towards ``points`` (N, 3), scaled so that
+    t = 1 lies ``stop_before_m`` before each point; and a mask (N,) of usable segments."""
+    vec = points.astype(np.float32) - origin.astype(np.float32)
+    dist = np.sqrt(np.einsum("ij,ij->i", vec, vec))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = 1.0 - np.float32(stop_before_m) / dist
+    usable = scale > 0
+    vec *= np.where(usable, scale, 0)[:, None]
+    return vec, usable
+
+
+# ---------------------------------------------------------------------------- the registrar
 class Registrar:
     """Holds the meshes and ray-casting scenes of one recording so that registering to another
     target reuses them. Build once per (rig, recording, params); call :meth:`register` per target.
     """
 
     def __init__(self, rig: Rig, recording: Recording, params: RegistrationParams | None = None):
-        raise NotImplementedError
+        self.rig = rig
+        self.recording = recording
+        self.params = params or RegistrationParams()
+        rig.depth()  # InputError if the rig has no depth camera
+        recording.check(rig)
+        self.meshes: Meshes | None = None
+        self._rays_cam: dict[str, np.ndarray] = {}   # camera -> (H*W, 3) z=1 directions, camera frame
+        self._rays_rig: dict[str, np.ndarray] = {}   # camera -> (H*W, 3) unit directions, rig frame
+        self._float_images: dict[str, np.ndarray] = {}
+        self.timings: dict[str, float] = {}
+
+    # -- caches
+    def _camera_rays(self, cam: Camera) -> np.ndarray:
+        if cam.name not in self._rays_cam:
+            self._rays_cam[cam.name] = pixel_rays_cam(cam)
+        return self._rays_cam[cam.name]
+
+    def _target_rays(self, cam: Camera) -> np.ndarray:
+        if cam.name not in self._rays_rig:
+            if cam.name == self.rig.depth_camera:
+                self._rays_rig[cam.name] = pixel_rays_rig(cam, self._camera_rays(cam))
+            else:  # float64 camera-frame rays of a 4K camera are 200 MB: keep only the float32 result
+                self._rays_rig[cam.name] = pixel_rays_rig(cam)
+        return self._rays_rig[cam.name]
+
+    @staticmethod
+    def _depth_camera_hits(meshes: Meshes, N: int) -> tuple[np.ndarray, ...]:
+        """Target rays of the depth camera itself, answered exactly instead of cast.
+
+        Each of its pixel rays passes exactly through that pixel's mesh vertex, and the mesh is a
+        height field over the depth image, so the first hit *is* the vertex; and the uncertainty
+        mesh runs along these very rays, so nothing can lie in front of a vertex (no P3.1).
+        Casting would be ill-conditioned here (rays through vertices and along curtain
+        triangles are where ray tracers miss or graze). Pixels with a measurement inside the ROI
+        that did not make it into the mesh (cut edges, flying pixels) are the depth camera's
+        P5: object area without a certain surface.
+        """
+        obj = meshes.object
+        sample = obj.pixel >= 0  # not the skirt
+        obj_idx = obj.pixel[sample].astype(np.int64)
+        points = np.full((N, 3), np.nan, dtype=np.float32)
+        points[obj_idx] = obj.vertices[sample]
+        has = np.zeros(N, dtype=bool)
+        has[obj_idx] = True
+        no_idx = np.flatnonzero(~has)
+        in_roi = obj.in_roi.reshape(-1) if obj.in_roi is not None else np.zeros(N, dtype=bool)
+        return obj_idx, points, np.zeros(len(obj_idx), dtype=bool), no_idx, in_roi[no_idx]
 
     def prepare(self, progress: Reporter | None = None) -> None:
         """Build object mesh, uncertainty mesh and Open3D scenes (idempotent)."""
-        raise NotImplementedError
+        if self.meshes is not None:
+            return
+        progress = ensure_reporter(progress)
+        dcam = self.rig.depth()
+        depth_m = self.recording.depth_m(self.rig.depth_scale)
+        with _stage(progress, self.timings, "depth rays", 0.0, 0.2):
+            rays = self._camera_rays(dcam)
+        self.meshes = build_meshes(self.rig, depth_m, self.params, rays, progress.sub(0.2, 1.0), self.timings)
+        if self.meshes.object.n_triangles == 0:
+            raise InputError(
+                "no surface inside the region of interest: the depth map has no valid neighbouring "
+                f"pixels within roi {self.params.roi(self.rig)[0].tolist()} .. {self.params.roi(self.rig)[1].tolist()}",
+                self.recording.paths.get("depth", self.recording.folder),
+            )
 
     def register(self, target: str, progress: Reporter | None = None) -> RegistrationResult:
-        raise NotImplementedError
+        progress = ensure_reporter(progress)
+        tcam = self.rig.camera(target)
+        timings: dict[str, float] = {}
+        t_start = time.perf_counter()
+        built = self.meshes is None
+        before = dict(self.timings)
+        self.prepare(progress.sub(0.0, 0.15))
+        if built:
+            for k, v in self.timings.items():
+                timings[k] = v - before.get(k, 0.0)
+        meshes = self.meshes
+        assert meshes is not None
+        p = self.params
+        H, W = tcam.shape
+        N = H * W
+        o_t = tcam.center_rig
+
+        # ---- target rays, cast once for all sources
+        with _stage(progress, timings, "target rays", 0.15, 0.3):
+            if target == self.rig.depth_camera:
+                obj_idx, points, p31, no_idx, p5 = self._depth_camera_hits(meshes, N)
+            else:
+                dirs = self._target_rays(tcam)
+                hits = meshes.object_scene.cast(o_t, dirs, check=progress.check)
+                obj_idx = np.flatnonzero(hits.hit)
+                t_obj = hits.t[obj_idx]
+                points = np.full((N, 3), np.nan, dtype=np.float32)
+                points[obj_idx] = o_t.astype(np.float32) + dirs[obj_idx] * t_obj[:, None]
+                # uncertainty mesh before the object hit (P3.1) / anywhere (P5 when no object hit)
+                seg = dirs[obj_idx] * np.maximum(t_obj - np.float32(p.uncertainty_tol_m), 0)[:, None]
+                p31 = meshes.uncertainty_scene.occluded(o_t, seg, 1.0, check=progress.check)
+                no_idx = np.flatnonzero(~hits.hit)
+                p5 = meshes.uncertainty_scene.occluded(o_t, dirs[no_idx], np.inf, check=progress.check)
+            area = np.full(N, AREA_P6, dtype=np.uint8)
+            area[obj_idx] = np.where(p31, AREA_P5, AREA_P4)
+            area[no_idx[p5]] = AREA_P5
+            base = np.full(N, CASE_BACKGROUND, dtype=np.uint8)
+            base[no_idx[p5]] = CASE_P5
+            base[obj_idx] = np.where(p31, CASE_P31, CASE_P1)
+
+        images = self.recording.images
+        cams = [c for c in self.rig.cameras if c.name != target]
+        registered: dict[str, np.ndarray] = {}
+        source_uv: dict[str, np.ndarray] = {}
+        cases: dict[str, np.ndarray] = {}
+        Xh = points[obj_idx]
+
+        # the target itself: its own pixel, its own raw value
+        if target in images:
+            with _stage(progress, timings, f"sampling {target}", 0.3, 0.32):
+                uv = np.full((N, 2), np.nan, dtype=np.float32)
+                uv[obj_idx, 0] = obj_idx % W
+                uv[obj_idx, 1] = obj_idx // W
+                source_uv[target] = uv.reshape(H, W, 2)
+                img = images[target]
+                C = 1 if img.ndim == 2 else int(np.prod(img.shape[2:]))
+                vals = nan_array((N, C))
+                vals[obj_idx] = img.reshape(N, C)[obj_idx]
+                registered[target] = _shape_values(vals, H, W, img)
+
+        n = max(1, len(cams))
+        for i, scam in enumerate(cams):
+            a = 0.32 + 0.68 * i / n
+            b = 0.32 + 0.68 * (i + 1) / n
+            with _stage(progress, timings, f"classification {scam.name}", a, a + 0.5 * (b - a)):
+                uvh, z = project_points(scam, Xh)
+                inside = (z > 0) & scam.in_image(uvh)
+                in_idx = np.flatnonzero(inside)
+                C_s = scam.center_rig
+                seg, usable = _segment_dirs(C_s, Xh[in_idx], p.occlusion_tol_m)
+                occ = np.zeros(len(in_idx), dtype=bool)
+                occ[usable] = meshes.object_scene.occluded(C_s, seg[usable], 1.0, check=progress.check)
+                # P3.2 only matters where neither P2 nor P3.1 already decides the case
+                need = np.flatnonzero(~occ & ~p31[in_idx])
+                seg_u, usable_u = _segment_dirs(C_s, Xh[in_idx[need]], p.uncertainty_tol_m)
+                unc = np.zeros(len(in_idx), dtype=bool)
+                unc[need[usable_u]] = meshes.uncertainty_scene.occluded(C_s, seg_u[usable_u], 1.0,
+                                                                         check=progress.check)
+                case_h = base[obj_idx].copy()  # 1 or 3 (P3.1)
+                ci = case_h[in_idx]
+                ci[unc] = CASE_P32
+                ci[occ] = CASE_P2
+                case_h[in_idx] = ci
+                case_h[~inside] = CASE_OUTSIDE
+                cs = base.copy()
+                cs[obj_idx] = case_h
+                cases[scam.name] = cs.reshape(H, W)
+                uv = np.full((N, 2), np.nan, dtype=np.float32)
+                uv[obj_idx] = uvh
+                source_uv[scam.name] = uv.reshape(H, W, 2)
+            if scam.name in images:
+                with _stage(progress, timings, f"sampling {scam.name}", a + 0.5 * (b - a), b):
+                    img = images[scam.name]
+                    C = 1 if img.ndim == 2 else int(np.prod(img.shape[2:]))
+                    vals = nan_array((N, C))
+                    sample_bilinear(img, uvh[in_idx], progress.sub(a + 0.5 * (b - a), b),
+                                    out=vals, rows=obj_idx[in_idx])
+                    registered[scam.name] = _shape_values(vals, H, W, img)
+
+        timings["total"] = time.perf_counter() - t_start
+        stats = {
+            "object_mesh": {"vertices": meshes.object.n_vertices, "triangles": meshes.object.n_triangles},
+            "uncertainty_mesh": {"vertices": meshes.uncertainty.n_vertices,
+                                 "triangles": meshes.uncertainty.n_triangles},
+            "target_pixels": int(N),
+            "object_hits": int(len(obj_idx)),
+        }
+        progress(1.0, "done")
+        return RegistrationResult(
+            target=target,
+            points_rig=points.reshape(H, W, 3),
+            area=area.reshape(H, W),
+            registered=registered,
+            source_uv=source_uv,
+            cases=cases,
+            params=p,
+            timings=timings,
+            stats=stats,
+        )
+
+
+def _shape_values(vals: np.ndarray, H: int, W: int, img: np.ndarray) -> np.ndarray:
+    """(N, C) -> (H, W) for single-channel sources, else (H, W, C)."""
+    C = vals.shape[1]
+    if img.ndim == 2 or C == 1:
+        return vals.reshape(H, W)
+    return vals.reshape(H, W, C)
 
 
 def register(rig: Rig, recording: Recording, target: str, params: RegistrationParams | None = None,
              progress: Reporter | None = None) -> RegistrationResult:
     """One-shot convenience: ``Registrar(rig, recording, params).register(target, progress)``."""
     return Registrar(rig, recording, params).register(target, progress)
+
+
+# ---------------------------------------------------------------------------- pixel transport
+_MESH_CACHE: dict[tuple, Meshes] = {}
+
+
+def _mesh_key(rig: Rig, depth_m: np.ndarray, params: RegistrationParams) -> tuple:
+    dcam = rig.depth()
+    lo, hi = params.roi(rig)
+    h = hashlib.blake2b(np.ascontiguousarray(depth_m, dtype=np.float32).tobytes(), digest_size=16).hexdigest()
+    geom = np.concatenate([dcam.K.ravel(), dcam.dist, dcam.R_cam_rig.ravel(), dcam.t_cam_rig, lo, hi,
+                           [params.edge_angle_deg, dcam.width, dcam.height]])
+    return (h, geom.tobytes())
+
+
+def transport_pixels(rig: Rig, depth_m: np.ndarray, origin: str, uv: np.ndarray, target: str,
+                     params: RegistrationParams | None = None) -> np.ndarray:
+    """Carry pixels (N, 2) of camera `origin` through the mesh of depth map `depth_m` (H, W metres, NaN = none) into camera `target`:
+    cast the origin's rays (through its distortion) into the object mesh, project the hits into target. Returns (N, 2), NaN where no hit.
+    Exactly the registration code path (same mesh builder, same ray caster).
+
+    Hits behind the target camera are NaN; positions outside the target image are returned as
+    they are (callers decide). The meshes of the last few depth maps are cached.
+    """
+    params = params or RegistrationParams()
+    depth_m = np.asarray(depth_m, dtype=np.float32)
+    key = _mesh_key(rig, depth_m, params)
+    meshes = _MESH_CACHE.get(key)
+    if meshes is None:
+        meshes = build_meshes(rig, depth_m, params)
+        if len(_MESH_CACHE) >= 4:
+            _MESH_CACHE.pop(next(iter(_MESH_CACHE)))
+        _MESH_CACHE[key] = meshes
+    ocam, tcam = rig.camera(origin), rig.camera(target)
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    out = np.full((len(uv), 2), np.nan)
+    ok = np.flatnonzero(np.isfinite(uv).all(axis=1))
+    if len(ok) == 0:
+        return out
+    o, d = ocam.rays_rig(uv[ok])
+    d = d.astype(np.float32)
+    hits = meshes.object_scene.cast(o, d)
+    t = hits.t.copy()
+    # A ray through a mesh vertex (e.g. an integer pixel of the depth camera itself, whose
+    # pixel centres *are* the vertices) is where ray tracers let rays slip through. Retry the
+    # misses nudged by 1e-3 px in four directions and keep the nearest hit.
+    miss = np.flatnonzero(~np.isfinite(t))
+    if len(miss):
+        eps = 1e-3
+        for du, dv in ((eps, 0), (-eps, 0), (0, eps), (0, -eps)):
+            _o, dn = ocam.rays_rig(uv[ok][miss] + (du, dv))
+            tn = meshes.object_scene.cast(o, dn.astype(np.float32)).t
+            t[miss] = np.minimum(t[miss], tn)
+    hit = np.isfinite(t)
+    X = o.astype(np.float32) + d[hit] * t[hit][:, None]
+    uvt, _z = project_points(tcam, X)
+    out[ok[hit]] = uvt
+    return out

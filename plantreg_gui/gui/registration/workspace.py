@@ -65,20 +65,9 @@ def _demo_job(folder: Path, settings, progress) -> dict:
     from ...core.synthetic import write_demo
 
     progress(0.0, "writing the demo rig and recording")
-    if _accepts_progress(write_demo):
-        write_demo(folder, progress=progress.sub(0.0, 0.6))
-    else:
-        write_demo(folder)
+    # the calibration session is the wizard's business; leaving it out halves the start-up
+    write_demo(folder, calibration=False, progress=progress.sub(0.0, 0.6))
     return _load_job(folder / "rig.json", folder / "recording", None, settings, progress.sub(0.6, 1.0))
-
-
-def _accepts_progress(fn: Callable) -> bool:
-    import inspect
-
-    try:
-        return "progress" in inspect.signature(fn).parameters
-    except (TypeError, ValueError):
-        return False
 
 
 def _meshes_of(registrar: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
