@@ -85,35 +85,14 @@ def _publish(tmp: Path, is_dir: bool = False) -> None:
     os.chmod(tmp, (0o777 if is_dir else 0o666) & ~_umask())
 
 
-def _tmp_beside(path: Path) -> Path:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    os.close(fd)
-    return Path(tmp)
-
-
 @contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success move it into place, on error remove it.
 
-    The temporary name keeps the real suffix last-but-one so writers that look at the suffix
-    (``cv2.imwrite``, ``tifffile``) work: ``.name.png.XXXX.part`` -> pass ``tmp`` as is to
-    writers that accept any name, or use :func:`atomic_path_suffixed`.
+    The temporary name is hidden and ends with the real suffix (``.name.XXXX.part.png``), so
+    writers that choose the format by suffix (``cv2.imwrite``, ``tifffile``, ``np.save``) work
+    and nothing half-written ever carries the final name.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _tmp_beside(path)
-    try:
-        yield tmp
-        _publish(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-@contextmanager
-def atomic_path_suffixed(path: str | Path) -> Iterator[Path]:
-    """Like :func:`atomic_path`, but the temporary file ends with the same suffix as ``path``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_s = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
@@ -126,6 +105,10 @@ def atomic_path_suffixed(path: str | Path) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+#: The same as :func:`atomic_path` (kept for callers that want to say the suffix matters).
+atomic_path_suffixed = atomic_path
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:
