@@ -1,12 +1,152 @@
-"""`plantreg calibrate` (placeholder until its issue lands)."""
+"""``plantreg calibrate``: calibrate a rig from a capture session.
 
-from ..core.errors import PlantregError
+    plantreg calibrate SESSION --out RIG --report REPORT
+                       [--roi XMIN YMIN ZMIN XMAX YMAX ZMAX] [--exclude POSE:CAM ...]
+                       [--detector auto|classic] [--quiet]
+
+Detects the board in every image, calibrates every camera and the rig jointly, computes the
+paper's three error tables and writes the rig file (with provenance under ``"calibration"``),
+the report JSON and its tables as CSV beside it (``REPORT_STEM_<table>.csv``). Progress on
+stderr, a summary on stdout. Session format and tables: ``docs/calibration.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import InputError
 
 
-def add_parser(sub):
-    p = sub.add_parser("calibrate", help="(not yet implemented)")
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "calibrate",
+        help="calibrate a rig from a capture session (board images of every camera)",
+        description="Calibrate all cameras of a rig from a capture session (session.json + one folder per "
+        "board pose) and write the rig file, an error report (intrinsic, extrinsic and depth tables) and "
+        "the tables as CSV.",
+    )
+    p.add_argument("session", type=Path, metavar="SESSION", help="capture session folder (with session.json)")
+    p.add_argument("--out", required=True, type=Path, metavar="RIG", help="rig file to write (JSON)")
+    p.add_argument("--report", required=True, type=Path, metavar="REPORT",
+                   help="report JSON to write; the tables go beside it as REPORT_STEM_<table>.csv")
+    p.add_argument("--roi", type=float, nargs=6, default=None, metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
+                   help="region of interest in the rig frame (metres), stored in the rig file and used to mesh "
+                        "the session's depth maps for the depth table (default: a box around the board per pose)")
+    p.add_argument("--exclude", nargs="+", default=[], metavar="POSE:CAM",
+                   help="leave these images out (added to the exclusions stored in the session)")
+    p.add_argument("--detector", choices=("auto", "classic"), default="auto",
+                   help="chessboard corner detector: 'auto' (findChessboardCornersSB, default) or 'classic' "
+                        "(findChessboardCorners + cornerSubPix 11x11, as OpenCV's stereo_calib sample; for comparison)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(run=run)
+    return p
 
 
-def run(args):
-    raise PlantregError("'calibrate' is not implemented yet")
+def _parse_excludes(items: list[str], session) -> set[tuple[str, str]]:
+    from ..core.calibration.session import parse_view_key
+
+    out = set()
+    poses = {p.name for p in session.poses}
+    for it in items:
+        try:
+            pose, cam = parse_view_key(it)
+        except ValueError:
+            raise InputError(f"--exclude '{it}': expected POSE:CAMERA, e.g. pose_02:left") from None
+        if pose not in poses:
+            raise InputError(f"--exclude '{it}': no pose '{pose}' in the session ({', '.join(sorted(poses))})")
+        if cam not in session.cameras:
+            raise InputError(f"--exclude '{it}': no camera '{cam}' ({', '.join(session.cameras)})")
+        out.add((pose, cam))
+    return out
+
+
+def _check_output(path: Path, what: str) -> None:
+    if path.exists() and path.is_dir():
+        raise InputError(f"{what} path is a folder, expected a file name", path)
+    if not path.parent.exists():
+        raise InputError(f"folder of the {what} does not exist", path.parent)
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import cli
+    from ..core.calibration import Session
+    from ..core.calibration.report import calibrated_rig, run_session, write_report
+    from ..core.progress import Reporter
+
+    session = Session.load(args.session)
+    excluded = session.excluded() | _parse_excludes(args.exclude, session)
+    roi = None
+    if args.roi is not None:
+        lo, hi = np.array(args.roi[:3]), np.array(args.roi[3:])
+        if not np.all(lo < hi):
+            raise InputError("--roi: XMIN YMIN ZMIN must be below XMAX YMAX ZMAX")
+        roi = (lo, hi)
+    _check_output(args.out, "rig file")
+    _check_output(args.report, "report")
+    if args.out.resolve() == args.report.resolve():
+        raise InputError("--out and --report must be different files", args.out)
+
+    options = None
+    if args.detector != "auto":
+        from ..core.calibration import DetectOptions
+
+        stored = session.detect_options()
+        options = {}
+        for pose in session.poses:
+            for cam in session.cameras:
+                o = stored.get((pose.name, cam), DetectOptions())
+                options[(pose.name, cam)] = DetectOptions(o.invert, o.enhance, args.detector)
+    progress = Reporter(cli.StderrProgress(quiet=args.quiet))
+    detections, cal, report = run_session(session, excluded, options, roi, progress)
+    command = "plantreg calibrate " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else None
+    rig = calibrated_rig(cal, session, report, roi, command, excluded)
+    # everything is computed: now write (each file atomically; the rig last)
+    written = write_report(report, args.report)
+    rig.save(args.out)
+
+    _print_summary(session, detections, cal, report)
+    print(f"wrote {args.out}")
+    for p in written:
+        print(f"wrote {p}")
+    return 0
+
+
+def _print_summary(session, detections, cal, report) -> None:
+    n_found = sum(1 for d in detections.values() if d.found)
+    print(f"board found in {n_found} of {sum(1 for d in detections.values() if d.status != 'missing')} images; "
+          f"joint RMS {cal.joint_rms_px:.3f} px")
+    for d in sorted(detections.values(), key=lambda d: d.key):
+        if d.status == "failed":
+            print(f"  not found: {d.pose}:{d.camera}: {d.reason}")
+    print("intrinsics (mean error px / normalised):")
+    for name, c in cal.intrinsics.items():
+        e = report.intrinsic.get(name)
+        print(f"  {name:14s} fx {c.K[0, 0]:9.2f} fy {c.K[1, 1]:9.2f} cx {c.K[0, 2]:8.2f} cy {c.K[1, 2]:8.2f} "
+              f"  {e['px']:.3f} px / {e['normalized']:.3f}  ({c.n_views} views)" if e else f"  {name}: -")
+    cams = list(session.cameras)
+    for title, table in (("extrinsic (epipolar)", report.extrinsic), ("depth", report.depth)):
+        if table is None:
+            continue
+        print(f"{title} error, px (rows: origin, columns: target):")
+        print("  " + " " * 14 + "".join(f"{t:>14s}" for t in cams))
+        for o in cams:
+            cells = []
+            for t in cams:
+                e = table.get(o, {}).get(t) if o != t else None
+                cells.append(f"{e['px']:14.3f}" if e else f"{'-':>14s}")
+            print(f"  {o:14s}" + "".join(cells))
+    if report.depth_bias:
+        vals = np.array([b["bias_mm"] for b in report.depth_bias.values()])
+        bad = [p for p, b in report.depth_bias.items() if not b["within_spec"]]
+        print(f"ToF bias: median {np.median(vals):.2f} mm, range {vals.min():.2f} .. {vals.max():.2f} mm over "
+              f"{len(vals)} poses" + (f"; OUT OF SPEC in {', '.join(bad)}" if bad else " (all within spec)"))
+    weak = cal.weak_views
+    if weak:
+        print("weak views (worst first; not dropped - exclude them with --exclude POSE:CAM if they are bad):")
+        for p, c, e, r in weak:
+            print(f"  {p}:{c}  {e:.3f} px  {r}")

@@ -84,8 +84,13 @@ class Worker(QObject):
         return self._running
 
     def wait(self, ms: int = 30000) -> bool:
-        """Cancel and wait for the thread to end (for closing the window)."""
+        """Cancel and wait for the thread to end (for closing the window).
+
+        The thread's event loop is told to quit here, not by the result slots: those run on the
+        GUI thread, which is the one blocked in this call.
+        """
         self.token.cancel()
+        self._thread.quit()
         return self._thread.wait(ms)
 
     def _end(self) -> None:

@@ -1,0 +1,93 @@
+"""Page 5: extrinsics — N x N epipolar error table and a 3D view of frusta and board poses."""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QGroupBox, QHeaderView, QLabel, QSplitter, QVBoxLayout, QWidget
+
+from . import results
+from .frusta_view import FrustaView
+from .widgets import banner, fill_matrix, fmt, grade_legend, item, make_table, set_banner
+
+
+class ExtrinsicsPage(QWidget):
+    title = "Extrinsics"
+
+    def __init__(self, wizard) -> None:
+        super().__init__()
+        self.wizard = wizard
+        self.model = wizard.model
+        lay = QVBoxLayout(self)
+        self.message = banner()
+        lay.addWidget(self.message)
+        split = QSplitter(Qt.Orientation.Horizontal)
+        left = QWidget()
+        ll = QVBoxLayout(left)
+        ll.setContentsMargins(0, 0, 0, 0)
+        g = QGroupBox("Extrinsic (epipolar) error: distance of the target's corner to the epipolar line "
+                      "of the origin's corner")
+        gl = QVBoxLayout(g)
+        self.table = make_table()
+        gl.addWidget(self.table, 1)
+        gl.addWidget(grade_legend())
+        ll.addWidget(g, 3)
+        g2 = QGroupBox("Camera poses in the rig frame (= depth camera frame): optical centre, rotation angle")
+        g2l = QVBoxLayout(g2)
+        self.poses = make_table()
+        g2l.addWidget(self.poses)
+        ll.addWidget(g2, 0)
+        split.addWidget(left)
+        right = QWidget()
+        rl = QVBoxLayout(right)
+        rl.setContentsMargins(0, 0, 0, 0)
+        self.view3d = FrustaView()
+        rl.addWidget(self.view3d, 1)
+        cap = QLabel("Camera frusta (one colour per camera, see the legend) and the calibrated board poses (grey). "
+                     "Drag to rotate, wheel to zoom.")
+        cap.setWordWrap(True)
+        cap.setStyleSheet("color: #444444;")
+        rl.addWidget(cap)
+        split.addWidget(right)
+        split.setSizes([700, 620])
+        lay.addWidget(split, 1)
+        self._drawn = None
+        self.model.calibration_changed.connect(self.refresh)
+        self.model.report_changed.connect(self.refresh)
+
+    def refresh(self) -> None:
+        cal, rep = self.model.calibration, self.model.report
+        if rep is None:
+            self.table.setRowCount(0)
+            set_banner(self.message, "Computing the error tables…" if self.wizard.is_busy()
+                       else "No error tables yet: they are computed when you come to this page.")
+        else:
+            set_banner(self.message, "Out of date: the calibration changed. Going Next or coming back recomputes."
+                       if self.model.report_stale else "")
+            names = results.camera_names(cal, self.model.session)
+            fill_matrix(self.table, names, results.table(rep, "extrinsic"), "extrinsic")
+        if cal is not None:
+            rig = cal.rig
+            self.poses.clear()
+            cols = ["camera", "x mm", "y mm", "z mm", "rotation °", "distance mm"]
+            self.poses.setColumnCount(len(cols))
+            self.poses.setHorizontalHeaderLabels(cols)
+            self.poses.setRowCount(len(rig.cameras))
+            for i, c in enumerate(rig.cameras):
+                ctr = c.center_rig * 1000
+                ang = float(np.degrees(np.linalg.norm(c.rvec)))
+                vals = [c.name + (" (depth)" if c.name == rig.depth_camera else ""), fmt(ctr[0], 1),
+                        fmt(ctr[1], 1), fmt(ctr[2], 1), fmt(ang, 2), fmt(np.linalg.norm(ctr), 1)]
+                for j, v in enumerate(vals):
+                    self.poses.setItem(i, j, item(v, bold=(j == 0)))
+            self.poses.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+            self.poses.resizeRowsToContents()
+            h = self.poses.horizontalHeader().height() + sum(self.poses.rowHeight(i) for i in range(len(rig.cameras)))
+            self.poses.setFixedHeight(h + 2 * self.poses.frameWidth() + 2)
+            if self._drawn is not cal:
+                self._drawn = cal
+                self.view3d.set_scene(list(rig.cameras), results.board_outlines(cal, self.model.session))
+
+    def showEvent(self, event) -> None:  # noqa: N802
+        super().showEvent(event)
+        self.refresh()

@@ -1,0 +1,143 @@
+"""3D view of the calibrated rig: camera frusta (one colour per camera, labelled) and board poses.
+
+The pyvistaqt plotter is created lazily (first time the page is shown) and only touched on the
+GUI thread; the wizard hands it plain arrays. For screenshots the rendered frame is copied
+into a label on top of the OpenGL widget, because grabbing a native GL window gives black.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QLabel, QStackedLayout, QWidget
+
+from .widgets import camera_colour, qpixmap
+
+
+def frustum_lines(cam, depth: float) -> tuple[np.ndarray, np.ndarray]:
+    """Frustum of ``cam`` (a core Camera) in the rig frame: points (5, 3) (centre + 4 image corners
+    at ``depth`` metres along the axis) and VTK line cells."""
+    w, h = cam.width, cam.height
+    uv = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]])
+    d_cam = cam.rays_cam(uv) * depth  # z = 1 rays scaled to the depth
+    pts_cam = np.vstack([np.zeros((1, 3)), d_cam])
+    pts = cam.to_rig(pts_cam)
+    lines = np.array([2, 0, 1, 2, 0, 2, 2, 0, 3, 2, 0, 4, 2, 1, 2, 2, 2, 3, 2, 3, 4, 2, 4, 1])
+    return pts, lines
+
+
+class FrustaView(QWidget):
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        self._stack = QStackedLayout(self)
+        self._stack.setStackingMode(QStackedLayout.StackingMode.StackOne)
+        self._placeholder = QLabel("3D view: shown once the rig is calibrated")
+        self._placeholder.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self._placeholder.setStyleSheet("background: #20242a; color: #dddddd;")
+        self._stack.addWidget(self._placeholder)
+        self._snapshot = QLabel()
+        self._snapshot.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self._snapshot.setStyleSheet("background: #20242a;")
+        self._snapshot.setScaledContents(True)
+        self._stack.addWidget(self._snapshot)
+        self.plotter = None
+        self._creating = False
+        self._scene = None
+        self.error: str | None = None
+        self.n_frusta = 0
+        self.n_boards = 0
+
+    def _ensure_plotter(self) -> bool:
+        if self.plotter is not None:
+            return True
+        if self.error is not None or self._creating:
+            return False
+        # constructing the GL widget processes events: a nested show must not build a second one
+        self._creating = True
+        try:
+            from pyvistaqt import QtInteractor
+
+            plotter = QtInteractor(self)
+            plotter.set_background("#20242a")
+            self._stack.insertWidget(0, plotter.interactor)
+            self.plotter = plotter
+        except Exception as e:  # no OpenGL: keep the page usable, say why the 3D view is missing
+            self.error = f"3D view unavailable ({type(e).__name__}: {e})"
+            self._placeholder.setText(self.error)
+            return False
+        finally:
+            self._creating = False
+        return True
+
+    def set_scene(self, cameras: list, boards: list[np.ndarray], depth: float | None = None) -> None:
+        """``cameras`` core Cameras (rig frame); ``boards`` (4, 3) rig-frame outlines of board poses."""
+        self._scene = (cameras, boards, depth)
+        if not self.isVisible():
+            return  # drawn when shown
+        self._draw()
+
+    def showEvent(self, event) -> None:  # noqa: N802
+        super().showEvent(event)
+        if self._scene is not None:
+            self._draw()
+
+    def _draw(self) -> None:
+        if self._scene is None or not self._ensure_plotter():
+            return
+        import pyvista as pv
+
+        cameras, boards, depth = self._scene
+        self._scene = None  # drawn; redraw only on new data
+        p = self.plotter
+        p.clear()
+        centres = np.array([c.center_rig for c in cameras]) if cameras else np.zeros((1, 3))
+        if depth is None:
+            dists = [float(np.linalg.norm(b.mean(axis=0) - centres.mean(axis=0))) for b in boards]
+            depth = 0.4 * float(np.median(dists)) if dists else 0.15
+        for i, b in enumerate(boards):
+            quad = pv.PolyData(np.asarray(b, float), faces=np.array([4, 0, 1, 2, 3]))
+            p.add_mesh(quad, color="#c8c8c8", opacity=0.35, show_edges=True, edge_color="#f0f0f0")
+        labels = []
+        for i, cam in enumerate(cameras):
+            pts, lines = frustum_lines(cam, depth)
+            poly = pv.PolyData(pts, lines=lines)
+            p.add_mesh(poly, color=camera_colour(i), line_width=3)
+            labels.append(cam.name)
+        if labels:
+            # a legend, not labels in the scene: the optical centres are centimetres apart
+            p.add_legend([[f"{n}", camera_colour(i)] for i, n in enumerate(labels)] + [["board poses", "#c8c8c8"]],
+                         bcolor="#2c313a", border=True, size=(0.22, 0.04 * (len(labels) + 1)), loc="upper right",
+                         face="rectangle")
+        p.add_axes()
+        # a side view of the rig (rig frame: z forward = down towards the ground): rig at the top,
+        # boards below it
+        p.view_vector((1.0, 0.45, -0.55), viewup=(0, 0, -1))
+        p.reset_camera()
+        self.n_frusta = len(cameras)
+        self.n_boards = len(boards)
+        self._stack.setCurrentWidget(self.plotter.interactor)
+        p.render()
+
+    def prepare_screenshot(self) -> None:
+        """Copy the rendered frame into a label on top (native GL windows grab as black)."""
+        if self.plotter is None or not self.isVisible():
+            return
+        if self._scene is not None:
+            self._draw()
+        try:
+            self.plotter.render()
+            img = self.plotter.screenshot(return_img=True)
+        except Exception:
+            return
+        if img is None:
+            return
+        self._snapshot.setPixmap(qpixmap(np.ascontiguousarray(img[:, :, :3])))
+        self._stack.setCurrentWidget(self._snapshot)
+
+    def close_plotter(self) -> None:
+        if self.plotter is not None:
+            try:
+                self.plotter.close()
+            except Exception:
+                pass
+            self.plotter = None

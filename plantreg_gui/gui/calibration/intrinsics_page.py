@@ -1,0 +1,138 @@
+"""Page 4: intrinsics — per-camera table and per-view error bars (click a bar to review the view)."""
+
+from __future__ import annotations
+
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QHBoxLayout, QHeaderView, QLabel, QPushButton, QSplitter, QVBoxLayout, QWidget
+
+from . import results
+from .charts import PerViewChart
+from .widgets import banner, fmt, grade_colour, item, make_table, set_banner
+
+
+class IntrinsicsPage(QWidget):
+    title = "Intrinsics"
+
+    def __init__(self, wizard) -> None:
+        super().__init__()
+        self.wizard = wizard
+        self.model = wizard.model
+        lay = QVBoxLayout(self)
+        self.message = banner()
+        lay.addWidget(self.message)
+        split = self.split = QSplitter(Qt.Orientation.Vertical)
+        self.table = make_table(stretch=False)
+        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+        split.addWidget(self.table)
+        self.chart = PerViewChart()
+        self.chart.bar_clicked.connect(self._bar)
+        split.addWidget(self.chart)
+        split.setSizes([200, 560])
+        lay.addWidget(split, 1)
+        self.worst = QLabel()
+        self.worst.setWordWrap(True)
+        lay.addWidget(self.worst)
+        hint = QLabel("Each bar is one view's mean reprojection error; orange bars are the views the "
+                      "calibration flags as weak, the dashed line is the camera's mean. Click a bar to "
+                      "inspect that view (page 3) and reject it there.")
+        hint.setWordWrap(True)
+        hint.setStyleSheet("color: #444444;")
+        lay.addWidget(hint)
+        hb = QHBoxLayout()
+        self.exclude_btn = QPushButton("Exclude weak views and recalibrate")
+        self.exclude_btn.clicked.connect(self.exclude_weak)
+        self.recal_btn = QPushButton("Recalibrate")
+        self.recal_btn.clicked.connect(lambda: self.wizard.recalibrate())
+        hb.addStretch(1)
+        hb.addWidget(self.recal_btn)
+        hb.addWidget(self.exclude_btn)
+        lay.addLayout(hb)
+        self.model.calibration_changed.connect(self.refresh)
+        self.model.report_changed.connect(self.refresh)
+        wizard.busy_changed.connect(self._on_busy)
+
+    def _on_busy(self, busy) -> None:
+        self._buttons()
+        if self.model.calibration is None:
+            self._banner()
+
+    def _banner(self) -> None:
+        if self.wizard.is_busy():
+            set_banner(self.message, "Calibrating… (the results appear here when done)")
+        elif self.wizard.last_error and self.model.session is not None:
+            set_banner(self.message, f"⚠ The calibration failed: {self.wizard.last_error}", error=True)
+        else:
+            set_banner(self.message, "Not calibrated yet: the calibration runs when you come to this page.")
+
+    def _buttons(self) -> None:
+        busy = self.wizard.is_busy()
+        weak = results.weak_views(self.model.calibration) if self.model.calibration_ready() else set()
+        weak -= self.model.excluded
+        self.exclude_btn.setText(f"Exclude {len(weak)} weak view{'s' if len(weak) != 1 else ''} and recalibrate")
+        self.exclude_btn.setEnabled(not busy and bool(weak))
+        self.recal_btn.setEnabled(not busy and self.model.session is not None)
+
+    def refresh(self) -> None:
+        cal = self.model.calibration
+        self._buttons()
+        if cal is None:
+            self.table.setRowCount(0)
+            self.chart.set_data({}, {}, {})
+            self.worst.setText("")
+            self._banner()
+            return
+        if self.model.calibration_stale:
+            set_banner(self.message, "The detections or exclusions changed since this calibration: "
+                                     "'Recalibrate' to update (or go Next, which recalibrates).")
+        else:
+            set_banner(self.message, "")
+        rows = results.intrinsic_rows(cal, self.model.report if self.model.report_ready() else None)
+        cols = ["camera", "fx", "fy", "cx", "cy", "distortion (k1 k2 p1 p2 k3 …)", "error px",
+                "error norm.", "views", "weak views"]
+        self.table.clear()
+        self.table.setColumnCount(len(cols))
+        self.table.setHorizontalHeaderLabels(cols)
+        self.table.setRowCount(len(rows))
+        for i, r in enumerate(rows):
+            vals = [r["camera"], fmt(r["fx"]), fmt(r["fy"]), fmt(r["cx"]), fmt(r["cy"]),
+                    " ".join(f"{d:+.4f}" for d in r["dist"][:5]) + (" …" if len(r["dist"]) > 5 else ""),
+                    fmt(r["px"], 3), fmt(r["normalized"], 3), str(r["views"]),
+                    ", ".join(p.replace("pose_", "") for p in r["weak"]) or "none"]
+            for j, v in enumerate(vals):
+                it = item(v, bold=(j == 0))
+                if j in (6, 7):
+                    it.setBackground(grade_colour(r["normalized"]))
+                if j == 5:
+                    it.setToolTip("OpenCV distortion coefficients: " + ", ".join(f"{d:.6g}" for d in r["dist"]))
+                self.table.setItem(i, j, it)
+        hh = self.table.horizontalHeader()
+        hh.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        hh.setSectionResizeMode(5, QHeaderView.ResizeMode.Stretch)
+        self.table.resizeRowsToContents()
+        h = self.table.horizontalHeader().height() + sum(self.table.rowHeight(i) for i in range(len(rows)))
+        h += 2 * self.table.frameWidth() + 2
+        self.table.setMaximumHeight(h)
+        self.split.setSizes([h, max(self.split.height() - h, 300)])
+        per_view = results.per_view_px(cal)
+        weak = results.weak_by_camera(cal)
+        mean = {r["camera"]: r["px"] for r in rows}
+        self.chart.set_data(per_view, weak, mean)
+        # mrcal-style: the worst views first, across cameras (on the normalised error)
+        norm = {n: float(c.normalization) for n, c in cal.intrinsics.items()}
+        worst = sorted(((px * norm[c], c, p, px) for c, v in per_view.items() for p, px in v.items()), reverse=True)[:6]
+        self.worst.setText("<b>Worst views first:</b> " + ", ".join(
+            f"{c} {p} {px:.3f} px ({nn:.3f} norm.)" for nn, c, p, px in worst))
+
+    def _bar(self, camera: str, pose: str) -> None:
+        self.wizard.show_view(camera, pose)
+
+    def exclude_weak(self) -> None:
+        weak = results.weak_views(self.model.calibration) if self.model.calibration is not None else set()
+        if not weak:
+            return
+        self.model.set_excluded_many(weak, True)
+        self.wizard.recalibrate()
+
+    def showEvent(self, event) -> None:  # noqa: N802
+        super().showEvent(event)
+        self.refresh()

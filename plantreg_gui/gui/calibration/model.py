@@ -1,0 +1,135 @@
+"""What the wizard knows about the open session: detections, review choices, results.
+
+Plain state with change signals; every computation lives in the calibration engine and runs on
+workers (see :mod:`.wizard`). Review choices (exclusions, per-image detection options) are kept
+in ``Session.review`` and saved with the session, so it reopens where it was left.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from PySide6.QtCore import QObject, Signal
+
+Key = tuple[str, str]  # (pose, camera)
+
+
+class WizardModel(QObject):
+    session_changed = Signal()
+    detection_changed = Signal(object)  # Key, or None for "many changed"
+    review_changed = Signal()
+    calibration_changed = Signal()
+    report_changed = Signal()
+
+    def __init__(self, parent: QObject | None = None) -> None:
+        super().__init__(parent)
+        self.session = None  # core.calibration.Session
+        self.detections: dict[Key, Any] = {}
+        self.thumbnails: dict[Key, np.ndarray] = {}
+        self.calibration = None
+        self.report = None
+        self.calibration_stale = False
+        self.report_stale = False
+        self.saved_paths: dict[str, str] = {}
+
+    # ------------------------------------------------------------------ session
+    def set_session(self, session) -> None:
+        self.session = session
+        self.detections.clear()
+        self.thumbnails.clear()
+        self.calibration = None
+        self.report = None
+        self.calibration_stale = self.report_stale = False
+        self.saved_paths = {}
+        self.session_changed.emit()
+        self.calibration_changed.emit()
+        self.report_changed.emit()
+
+    def keys(self) -> list[Key]:
+        """Every (pose, camera) of the session, pose-major."""
+        s = self.session
+        if s is None:
+            return []
+        return [(p.name, c) for p in s.poses for c in s.camera_names]
+
+    def detections_complete(self) -> bool:
+        s = self.session
+        if s is None:
+            return False
+        return all(k in self.detections for k in self.keys())
+
+    # ------------------------------------------------------------------ review (persisted)
+    @property
+    def excluded(self) -> set[Key]:
+        return self.session.excluded() if self.session is not None else set()
+
+    def set_excluded_many(self, keys: set[Key], excluded: bool) -> None:
+        ex = self.excluded
+        new = (ex | set(keys)) if excluded else (ex - set(keys))
+        if new == ex:
+            return
+        self.session.set_excluded(new)
+        self._save_review()
+        self.invalidate_calibration()
+        self.review_changed.emit()
+
+    def options(self) -> dict[Key, Any]:
+        return self.session.detect_options() if self.session is not None else {}
+
+    def set_options(self, key: Key, options) -> None:
+        self.session.set_detect_options(key[0], key[1], options)
+        self._save_review()
+
+    def set_wizard_page(self, page: int) -> None:
+        """Remember the page (in ``review``) so that the session reopens there."""
+        if self.session is None:
+            return
+        if self.session.review.get("wizard_page") != page:
+            self.session.review["wizard_page"] = int(page)
+            self._save_review()
+
+    def _save_review(self) -> None:
+        try:
+            self.session.save()
+        except OSError:
+            pass  # a read-only session still works; the choices just do not persist
+
+    # ------------------------------------------------------------------ results
+    def put_detection(self, det, thumb: np.ndarray | None) -> None:
+        key = (det.pose, det.camera)
+        self.detections[key] = det
+        if thumb is not None:
+            self.thumbnails[key] = thumb
+        self.invalidate_calibration()
+        self.detection_changed.emit(key)
+
+    def invalidate_calibration(self) -> None:
+        if self.calibration is not None and not self.calibration_stale:
+            self.calibration_stale = True
+            self.calibration_changed.emit()
+        self.invalidate_report()
+
+    def invalidate_report(self) -> None:
+        if self.report is not None and not self.report_stale:
+            self.report_stale = True
+            self.report_changed.emit()
+
+    def set_calibration(self, cal) -> None:
+        self.calibration = cal
+        self.calibration_stale = False
+        self.report = None
+        self.report_stale = False
+        self.calibration_changed.emit()
+        self.report_changed.emit()
+
+    def set_report(self, report) -> None:
+        self.report = report
+        self.report_stale = False
+        self.report_changed.emit()
+
+    def calibration_ready(self) -> bool:
+        return self.calibration is not None and not self.calibration_stale
+
+    def report_ready(self) -> bool:
+        return self.report is not None and not self.report_stale

@@ -1,0 +1,146 @@
+"""Read-outs of the engine's results for display (the one place that knows their structure)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+Key = tuple[str, str]
+
+
+def camera_names(cal, session) -> list[str]:
+    if cal is not None:
+        return list(cal.rig.names)
+    return list(session.camera_names) if session is not None else []
+
+
+def intrinsic_rows(cal, report=None) -> list[dict[str, Any]]:
+    """Per camera: fx, fy, cx, cy, dist, px (mean corner distance), normalized, views, weak."""
+    rows = []
+    intr_tab = _get(report, "intrinsic") if report is not None else None
+    for name, c in cal.intrinsics.items():
+        K = np.asarray(c.K)
+        px = float(c.mean_px)
+        nn = px * float(c.normalization)
+        if isinstance(intr_tab, dict) and isinstance(intr_tab.get(name), dict):
+            px = float(intr_tab[name].get("px", px))
+            nn = float(intr_tab[name].get("normalized", nn))
+        rows.append({"camera": name, "fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
+                     "cy": float(K[1, 2]), "dist": [float(d) for d in np.ravel(c.dist)], "px": px,
+                     "normalized": nn, "rms": float(c.rms_px), "views": int(c.n_views or len(c.per_view_px)),
+                     "weak": [p for p, _e, _r in c.weak_views]})
+    return rows
+
+
+def per_view_px(cal) -> dict[str, dict[str, float]]:
+    return {name: {p: float(v) for p, v in c.per_view_px.items()} for name, c in cal.intrinsics.items()}
+
+
+def weak_by_camera(cal) -> dict[str, set[str]]:
+    return {name: {p for p, _e, _r in c.weak_views} for name, c in cal.intrinsics.items()}
+
+
+def weak_views(cal) -> set[Key]:
+    if cal is None:
+        return set()
+    return {(p, name) for name, c in cal.intrinsics.items() for p, _e, _r in c.weak_views}
+
+
+def board_outlines(cal, session) -> list[np.ndarray]:
+    """Rig-frame outlines (4, 3) of the printed pattern in every calibrated board pose."""
+    b = cal.board
+    s = b.square_size
+    corners = np.array([[-s, -s, 0], [b.columns * s, -s, 0], [b.columns * s, b.rows * s, 0], [-s, b.rows * s, 0]])
+    out = []
+    for _pose, (R, t) in sorted(cal.board_poses.items()):
+        out.append(corners @ np.asarray(R).T + np.asarray(t).reshape(3))
+    return out
+
+
+def board_distance_mm(cal) -> dict[str, float]:
+    """Distance (mm) from the depth camera (rig origin) to the board centre, per pose."""
+    if cal is None:
+        return {}
+    b = cal.board
+    c = np.array([(b.columns - 1) * b.square_size / 2, (b.rows - 1) * b.square_size / 2, 0.0])
+    return {p: float(np.linalg.norm(np.asarray(R) @ c + np.asarray(t).reshape(3)) * 1000)
+            for p, (R, t) in cal.board_poses.items()}
+
+
+def _get(obj, name: str):
+    if obj is None:
+        return None
+    if isinstance(obj, dict):
+        return obj.get(name)
+    return getattr(obj, name, None)
+
+
+def table(report, which: str) -> dict:
+    """``report.<which>`` as {origin: {target: {"px", "normalized"}}} ({} if absent)."""
+    t = _get(report, which)
+    return t if isinstance(t, dict) else {}
+
+
+def max_cell(tab: dict) -> tuple[str, str, float] | None:
+    best = None
+    for o, row in (tab or {}).items():
+        for t, c in (row or {}).items():
+            if o == t or not isinstance(c, dict):
+                continue
+            v = c.get("px")
+            if v is not None and math.isfinite(float(v)) and (best is None or float(v) > best[2]):
+                best = (o, t, float(v))
+    return best
+
+
+def _norm(report, camera: str) -> float:
+    cams = _get(report, "cameras") or {}
+    try:
+        return float(cams[camera]["normalization"])
+    except (KeyError, TypeError, ValueError):
+        return float("nan")
+
+
+def bias_distance_mm(report) -> dict[str, float]:
+    """Board distance (mm) per pose as the engine measured it for the ToF bias."""
+    d = _get(report, "depth_bias") or {}
+    out = {}
+    for p, v in d.items():
+        try:
+            out[str(p)] = float(v["distance_m"]) * 1000.0
+        except (KeyError, TypeError, ValueError):
+            continue
+    return out
+
+
+def depth_bias(report) -> dict[str, float]:
+    d = _get(report, "depth_bias_mm")
+    return {str(k): float(v) for k, v in d.items() if v is not None} if isinstance(d, dict) else {}
+
+
+def depth_views(report) -> tuple[list[tuple[str, dict]], list[tuple[str, str]]]:
+    """Per-view depth errors: rows [(pose, {(origin, target): {"px", "normalized"}})] worst first,
+    and the (origin, target) pairs present."""
+    views = _get(report, "views")
+    rows: dict[str, dict] = {}
+    if isinstance(views, dict):
+        dv = views.get("depth")
+        if isinstance(dv, dict):
+            for o, row in dv.items():
+                for t, per_pose in (row or {}).items():
+                    if isinstance(per_pose, dict):
+                        for pose, c in per_pose.items():
+                            if isinstance(c, dict):
+                                rows.setdefault(pose, {})[(o, t)] = c
+                            elif c is not None:
+                                nrm = _norm(report, t)
+                                rows.setdefault(pose, {})[(o, t)] = {"px": float(c), "normalized": float(c) * nrm}
+    pairs = sorted({pr for v in rows.values() for pr in v})
+
+    def worst(item):
+        vals = [c.get("px") for c in item[1].values() if c.get("px") is not None]
+        return -max(vals) if vals else 0.0
+
+    return sorted(rows.items(), key=worst), pairs

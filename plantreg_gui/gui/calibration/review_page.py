@@ -1,0 +1,406 @@
+"""Page 3: corner review — corners drawn in order, accept/reject, re-detect, coverage per camera."""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import cv2
+import numpy as np
+from PySide6.QtCore import Qt
+from PySide6.QtGui import QColor, QKeySequence, QPainter, QPen, QShortcut
+from PySide6.QtWidgets import (QCheckBox, QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel,
+                               QListWidget, QListWidgetItem, QPushButton, QSizePolicy, QSplitter,
+                               QVBoxLayout, QWidget)
+
+from .image_view import ImageView
+from .widgets import banner, qpixmap, set_banner, to_display
+
+STATUS_MARK = {"found": "✔", "failed": "✖", "missing": "—", None: "…"}
+
+
+def coverage_map(detections, camera: str, excluded: set, max_side: int = 240) -> tuple[np.ndarray, tuple[int, int]] | None:
+    """Count per (downscaled) pixel of how many used board views of ``camera`` cover it.
+
+    Returns ``(counts (h, w) int32, (W, H) image size)`` or None without any found board. The
+    board area of a view is the convex hull of its detected corners.
+    """
+    dets = [d for (p, c), d in detections.items()
+            if c == camera and d.status == "found" and d.corners is not None and (p, c) not in excluded]
+    if not dets:
+        return None
+    W, H = dets[0].image_size
+    s = max_side / max(W, H)
+    w, h = max(1, round(W * s)), max(1, round(H * s))
+    acc = np.zeros((h, w), np.int32)
+    for d in dets:
+        hull = cv2.convexHull(np.asarray(d.corners, np.float32).reshape(-1, 1, 2) * s)
+        m = np.zeros((h, w), np.uint8)
+        cv2.fillConvexPoly(m, np.round(hull).astype(np.int32), 1)
+        acc += m
+    return acc, (W, H)
+
+
+def coverage_image(acc: np.ndarray) -> np.ndarray:
+    """Heat map RGB (h, w, 3): never-covered regions striped dark red, covered ones viridis."""
+    top = max(int(acc.max()), 1)
+    norm = (np.clip(acc / top, 0, 1) * 255).astype(np.uint8)
+    rgb = cv2.cvtColor(cv2.applyColorMap(norm, cv2.COLORMAP_VIRIDIS), cv2.COLOR_BGR2RGB)
+    yy, xx = np.mgrid[0:acc.shape[0], 0:acc.shape[1]]
+    stripes = ((xx + yy) // 6) % 2 == 0
+    empty = acc == 0
+    rgb[empty & stripes] = (150, 30, 30)
+    rgb[empty & ~stripes] = (90, 20, 20)
+    return rgb
+
+
+def empty_regions(acc: np.ndarray) -> list[str]:
+    """Names of the 3 x 3 image regions less than a quarter covered."""
+    h, w = acc.shape
+    names = [["top-left", "top", "top-right"], ["left", "centre", "right"],
+             ["bottom-left", "bottom", "bottom-right"]]
+    out = []
+    for i in range(3):
+        for j in range(3):
+            cell = acc[i * h // 3:(i + 1) * h // 3, j * w // 3:(j + 1) * w // 3]
+            if cell.size and (cell > 0).mean() < 0.25:
+                out.append(names[i][j])
+    return out
+
+
+class ReviewPage(QWidget):
+    title = "Corner review"
+
+    def __init__(self, wizard) -> None:
+        super().__init__()
+        self.wizard = wizard
+        self.model = wizard.model
+        self.current: tuple[str, str] | None = None
+        self._cache: OrderedDict = OrderedDict()
+        lay = QHBoxLayout(self)
+        split = QSplitter(Qt.Orientation.Horizontal)
+        lay.addWidget(split)
+
+        # --- image list
+        left = QWidget()
+        ll = QVBoxLayout(left)
+        ll.setContentsMargins(0, 0, 0, 0)
+        self.cam_filter = QComboBox()
+        self.cam_filter.currentIndexChanged.connect(self._fill_list)
+        ll.addWidget(self.cam_filter)
+        self.list = QListWidget()
+        self.list.currentItemChanged.connect(self._on_item)
+        ll.addWidget(self.list, 1)
+        split.addWidget(left)
+
+        # --- image
+        mid = QWidget()
+        ml = QVBoxLayout(mid)
+        ml.setContentsMargins(0, 0, 0, 0)
+        self.caption = QLabel()
+        self.caption.setWordWrap(True)
+        ml.addWidget(self.caption)
+        self.view = ImageView()
+        ml.addWidget(self.view, 1)
+        legend = QLabel("Corner order: <span style='color:#d00000'><b>ring + 0 = first corner</b></span>, "
+                        "red arrow = along the first row, colour runs red → yellow → green → blue to the last "
+                        "corner; dotted = wrap to the next row. The same board corner must carry the ring "
+                        "in every camera. Wheel zooms, drag pans, double-click fits.")
+        legend.setWordWrap(True)
+        legend.setStyleSheet("color: #444444;")
+        ml.addWidget(legend)
+        split.addWidget(mid)
+
+        # --- controls + coverage
+        right = QWidget()
+        rl = QVBoxLayout(right)
+        rl.setContentsMargins(0, 0, 0, 0)
+        g = QGroupBox("This image")
+        gl = QVBoxLayout(g)
+        self.use = QCheckBox("Use this view in the calibration")
+        self.use.toggled.connect(self._toggle_use)
+        gl.addWidget(self.use)
+        hb = QHBoxLayout()
+        self.accept_btn = QPushButton("Accept (A)")
+        self.reject_btn = QPushButton("Reject (R)")
+        for key, used in (("A", True), ("R", False)):
+            sc = QShortcut(QKeySequence(key), self)
+            sc.setContext(Qt.ShortcutContext.WidgetWithChildrenShortcut)
+            sc.activated.connect(lambda u=used: self.set_used(u))
+        self.accept_btn.clicked.connect(lambda: self.set_used(True))
+        self.reject_btn.clicked.connect(lambda: self.set_used(False))
+        hb.addWidget(self.accept_btn)
+        hb.addWidget(self.reject_btn)
+        gl.addLayout(hb)
+        f = QFormLayout()
+        self.polarity = QComboBox()
+        self.polarity.addItems(["automatic (by modality)", "normal (dark squares dark)", "inverted (heated board)"])
+        self.enhance = QCheckBox("contrast enhancement (CLAHE)")
+        f.addRow("Polarity:", self.polarity)
+        f.addRow(self.enhance)
+        gl.addLayout(f)
+        self.redetect_btn = QPushButton("Re-detect with these options")
+        self.redetect_btn.clicked.connect(self._redetect)
+        gl.addWidget(self.redetect_btn)
+        self.info = banner()
+        gl.addWidget(self.info)
+        rl.addWidget(g)
+
+        cg = QGroupBox("Coverage (where the board has been)")
+        cl = QVBoxLayout(cg)
+        self.cov_cam = QComboBox()
+        self.cov_cam.currentIndexChanged.connect(self._update_coverage)
+        cl.addWidget(self.cov_cam)
+        self.cov_img = QLabel()
+        self.cov_img.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.cov_img.setMinimumHeight(150)
+        self.cov_img.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Ignored)
+        cl.addWidget(self.cov_img, 1)
+        self.cov_text = QLabel()
+        self.cov_text.setWordWrap(True)
+        cl.addWidget(self.cov_text)
+        rl.addWidget(cg, 1)
+        split.addWidget(right)
+        split.setSizes([220, 800, 360])
+        split.setStretchFactor(1, 1)
+
+        self.model.session_changed.connect(self._session)
+        self.model.detection_changed.connect(self._detection)
+        self.model.review_changed.connect(self._review)
+        self.model.calibration_changed.connect(self._relabel)
+        wizard.busy_changed.connect(lambda b: self.redetect_btn.setEnabled(not b and self.current is not None))
+
+    # ------------------------------------------------------------------ lists
+    def _session(self) -> None:
+        self._cache.clear()
+        self.current = None
+        s = self.model.session
+        self.cam_filter.blockSignals(True)
+        self.cam_filter.clear()
+        self.cam_filter.addItem("all cameras")
+        self.cov_cam.blockSignals(True)
+        self.cov_cam.clear()
+        if s is not None:
+            self.cam_filter.addItems(s.camera_names)
+            self.cov_cam.addItems(s.camera_names)
+        self.cam_filter.blockSignals(False)
+        self.cov_cam.blockSignals(False)
+        self._fill_list()
+        self.view.clear("no image selected")
+        if self.list.count():
+            self.list.setCurrentRow(0)  # something to look at, also when the page is already shown
+
+    def _fill_list(self) -> None:
+        s = self.model.session
+        keep = self.current
+        self.list.blockSignals(True)
+        self.list.clear()
+        if s is not None:
+            cam = self.cam_filter.currentText()
+            for p in s.poses:
+                for c in s.camera_names:
+                    if cam not in ("", "all cameras") and c != cam:
+                        continue
+                    it = QListWidgetItem()
+                    it.setData(Qt.ItemDataRole.UserRole, (p.name, c))
+                    self.list.addItem(it)
+                    self._label(it)
+        self.list.blockSignals(False)
+        if keep is not None:
+            self.select(keep[1], keep[0])
+
+    def _label(self, it: QListWidgetItem) -> None:
+        key = it.data(Qt.ItemDataRole.UserRole)
+        d = self.model.detections.get(key)
+        st = getattr(d, "status", None)
+        ex = key in self.model.excluded
+        weak = self._weak.get(key)
+        it.setText(f"{STATUS_MARK.get(st, '?')} {key[0]} · {key[1]}" + ("  (rejected)" if ex else "")
+                   + (f"  (weak {weak:.2f} px)" if weak is not None and not ex else ""))
+        col = {"found": "#1e7e34", "failed": "#b02a37", "missing": "#6c757d"}.get(st, "#000000")
+        it.setForeground(QColor("#999999" if ex else ("#c65d00" if weak is not None else col)))
+        if d is not None and d.reason:
+            it.setToolTip(d.reason)
+
+    @property
+    def _weak(self) -> dict:
+        cal = self.model.calibration
+        if cal is None:
+            return {}
+        return {(p, c): e for c, ci in cal.intrinsics.items() for p, e, _r in ci.weak_views}
+
+    def _relabel(self) -> None:
+        for i in range(self.list.count()):
+            self._label(self.list.item(i))
+
+    def _detection(self, key) -> None:
+        for i in range(self.list.count()):
+            it = self.list.item(i)
+            if key is None or it.data(Qt.ItemDataRole.UserRole) == key:
+                self._label(it)
+        if key is None or key == self.current:
+            self._show()
+        if self.isVisible():
+            self._update_coverage()
+
+    def _review(self) -> None:
+        self._relabel()
+        self._show_controls()
+        self._update_coverage()
+
+    # ------------------------------------------------------------------ selection
+    def select(self, camera: str, pose: str) -> bool:
+        """Show image (pose, camera); returns False if the session has no such image."""
+        key = (pose, camera)
+        if self.cam_filter.currentText() not in ("all cameras", camera):
+            self.cam_filter.setCurrentText(camera)
+        for i in range(self.list.count()):
+            it = self.list.item(i)
+            if it.data(Qt.ItemDataRole.UserRole) == key:
+                self.list.setCurrentItem(it)
+                self.list.scrollToItem(it)
+                self.current = key
+                self._show()
+                if self.cov_cam.currentText() != camera:
+                    self.cov_cam.setCurrentText(camera)
+                return True
+        return False
+
+    def _on_item(self, it, _prev=None) -> None:
+        if it is None:
+            return
+        self.current = it.data(Qt.ItemDataRole.UserRole)
+        self._show()
+        if self.cov_cam.currentText() != self.current[1]:
+            self.cov_cam.setCurrentText(self.current[1])
+
+    def _image(self, key) -> np.ndarray | None:
+        from ...core.imageio import read_image
+
+        if key in self._cache:
+            self._cache.move_to_end(key)
+            return self._cache[key]
+        s = self.model.session
+        path = s.pose(key[0]).images.get(key[1]) if s is not None else None
+        if path is None:
+            return None
+        try:
+            img = to_display(read_image(path))
+        except Exception:
+            return None
+        self._cache[key] = img
+        while len(self._cache) > 12:  # a few full images, not the whole session
+            self._cache.popitem(last=False)
+        return img
+
+    def _show(self) -> None:
+        key = self.current
+        s = self.model.session
+        if key is None or s is None:
+            return
+        img = self._image(key)
+        d = self.model.detections.get(key)
+        if img is None:
+            self.view.clear(f"{key[0]} / {key[1]}: no image" if d is None or not d.reason else d.reason)
+        else:
+            self.view.set_image(img)
+            if d is not None and d.status == "found":
+                self.view.set_corners(d.corners, s.board.columns, getattr(d, "ids", None)
+                                      if s.board.type == "charuco" else None)
+                self.view.focus_corners(d.corners)
+        st = getattr(d, "status", None)
+        cap = f"<b>{key[0]} · {key[1]}</b> ({s.cameras.get(key[1], '')}) — "
+        if d is None:
+            cap += "not detected yet"
+        elif st == "found":
+            cap += f"{len(d.corners)} corners found" + (" (polarity inverted)" if getattr(d, "inverted", False) else "")
+        else:
+            cap += f"{st}: {d.reason}"
+        self.caption.setText(cap)
+        self._show_controls()
+
+    def _show_controls(self) -> None:
+        key = self.current
+        if key is None or self.model.session is None:
+            return
+        d = self.model.detections.get(key)
+        self.use.blockSignals(True)
+        self.use.setChecked(key not in self.model.excluded)
+        self.use.setEnabled(d is not None and d.status == "found")
+        self.use.blockSignals(False)
+        opts = self.model.options().get(key)
+        inv = getattr(opts, "invert", None)
+        self.polarity.setCurrentIndex(0 if inv is None else (2 if inv else 1))
+        self.enhance.setChecked(bool(getattr(opts, "enhance", False)))
+        self.redetect_btn.setEnabled(not self.wizard.is_busy() and key[1] in self.model.session.pose(key[0]).images)
+        if d is not None and d.status == "failed":
+            set_banner(self.info, f"Detection failed: {d.reason}. For a thermal image try the inverted polarity "
+                                  "and contrast enhancement, then Re-detect.")
+        elif key in self.model.excluded:
+            set_banner(self.info, "Rejected: this view is not used in the calibration.")
+        else:
+            set_banner(self.info, "")
+
+    # ------------------------------------------------------------------ actions
+    def _toggle_use(self, on: bool) -> None:
+        self.set_used(on)
+
+    def set_used(self, used: bool) -> None:
+        if self.current is None:
+            return
+        self.model.set_excluded_many({self.current}, not used)
+
+    def current_options(self):
+
+        from ...core.calibration import DetectOptions
+        inv = {0: None, 1: False, 2: True}[self.polarity.currentIndex()]
+        return DetectOptions(invert=inv, enhance=self.enhance.isChecked())
+
+    def _redetect(self) -> None:
+        if self.current is not None:
+            self.wizard.redetect(self.current, self.current_options())
+
+    # ------------------------------------------------------------------ coverage
+    def _update_coverage(self) -> None:
+        cam = self.cov_cam.currentText()
+        if not cam:
+            self.cov_img.clear()
+            self.cov_text.setText("")
+            return
+        res = coverage_map(self.model.detections, cam, self.model.excluded)
+        if res is None:
+            self.cov_img.setText(f"no board found for {cam} yet")
+            self.cov_text.setText("")
+            self.coverage_fraction = 0.0
+            return
+        acc, (W, H) = res
+        rgb = coverage_image(acc)
+        pm = qpixmap(rgb)
+        p = QPainter(pm)
+        p.setPen(QPen(QColor(255, 255, 255, 140), 1, Qt.PenStyle.DashLine))
+        for k in (1, 2):
+            p.drawLine(k * pm.width() // 3, 0, k * pm.width() // 3, pm.height())
+            p.drawLine(0, k * pm.height() // 3, pm.width(), k * pm.height() // 3)
+        p.end()
+        target = self.cov_img.size()
+        self.cov_img.setPixmap(pm.scaled(max(target.width() - 4, 50), max(target.height() - 4, 50),
+                                         Qt.AspectRatioMode.KeepAspectRatio, Qt.TransformationMode.SmoothTransformation))
+        self.coverage_fraction = float((acc > 0).mean())
+        empty = empty_regions(acc)
+        n = int(acc.max())
+        txt = (f"{cam} ({W} × {H}): {100 * self.coverage_fraction:.0f} % of the image seen by the board, "
+               f"up to {n} views per pixel (yellow). ")
+        txt += (f"<b style='color:#b02a37'>Still empty: {', '.join(empty)}</b> — put the board there."
+                if empty else "Every region of the image has been covered.")
+        self.cov_text.setText(txt)
+
+    def showEvent(self, event) -> None:  # noqa: N802
+        super().showEvent(event)
+        self._relabel()
+        if self.current is None and self.list.count():
+            self.list.setCurrentRow(0)
+        self._update_coverage()
+
+    def resizeEvent(self, event) -> None:  # noqa: N802
+        super().resizeEvent(event)
+        if self.isVisible():
+            self._update_coverage()

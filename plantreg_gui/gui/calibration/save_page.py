@@ -1,0 +1,360 @@
+"""Page 7: save — ROI editor over a depth map, then the rig file, the report JSON and CSV tables."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QFileDialog, QFormLayout, QGridLayout,
+                               QGroupBox, QHBoxLayout, QLabel, QLineEdit, QPushButton, QSizePolicy,
+                               QVBoxLayout, QWidget)
+
+from .widgets import banner, qpixmap, set_banner
+
+AXES = ("x", "y", "z")
+
+
+class SavePage(QWidget):
+    title = "Save"
+
+    def __init__(self, wizard) -> None:
+        super().__init__()
+        self.wizard = wizard
+        self.model = wizard.model
+        self._rays = None  # (cal id, rays (H*W, 3) z=1 in the depth camera frame)
+        self._depth_cache: dict[str, np.ndarray] = {}
+        self.inside_fraction = float("nan")
+        self._roi_set = False
+        lay = QHBoxLayout(self)
+
+        # --- ROI over the depth map
+        g = QGroupBox("Region of interest (rig frame = depth camera frame; max z is the ground plane)")
+        gl = QVBoxLayout(g)
+        top = QHBoxLayout()
+        top.addWidget(QLabel("Depth map of pose:"))
+        self.pose = QComboBox()
+        self.pose.currentIndexChanged.connect(self._schedule)
+        top.addWidget(self.pose, 1)
+        self.fit_btn = QPushButton("Fit ROI to this depth map")
+        self.fit_btn.setToolTip("Set the ROI to the 1st-99th percentile box of the measured points")
+        self.fit_btn.clicked.connect(self.fit_roi)
+        top.addWidget(self.fit_btn)
+        gl.addLayout(top)
+        self.image = QLabel()
+        self.image.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.image.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Ignored)
+        self.image.setMinimumSize(320, 240)
+        self.image.setStyleSheet("background: #202020; color: #dddddd;")
+        gl.addWidget(self.image, 1)
+        self.legend = QLabel("Measured depth in colour inside the ROI; <span style='color:#c00000'><b>red</b></span>: "
+                             "outside the ROI; <span style='color:#1060ff'><b>blue</b></span>: beyond the ground "
+                             "plane (z > max z). <span style='color:#b8a000'><b>Yellow</b></span>: the ROI box; "
+                             "<span style='color:#00a0a0'><b>cyan</b></span>: the ground plane (its 10 cm grid "
+                             "and where it meets the scene).")
+        self.legend.setWordWrap(True)
+        gl.addWidget(self.legend)
+        grid = QGridLayout()
+        self.spins: dict[str, QDoubleSpinBox] = {}
+        grid.addWidget(QLabel(""), 0, 0)
+        for j, a in enumerate(AXES):
+            grid.addWidget(QLabel(f"<b>{a}</b> (m)"), 0, j + 1, Qt.AlignmentFlag.AlignCenter)
+        for i, which in enumerate(("min", "max")):
+            grid.addWidget(QLabel(which + (" (z = ground)" if which == "max" else "")), i + 1, 0)
+            for j, a in enumerate(AXES):
+                sp = QDoubleSpinBox()
+                sp.setRange(-10.0, 20.0)
+                sp.setDecimals(3)
+                sp.setSingleStep(0.01)
+                sp.valueChanged.connect(self._schedule)
+                self.spins[f"{which}_{a}"] = sp
+                grid.addWidget(sp, i + 1, j + 1)
+        gl.addLayout(grid)
+        self.roi_msg = banner()
+        gl.addWidget(self.roi_msg)
+        lay.addWidget(g, 3)
+
+        # --- outputs
+        o = QGroupBox("Outputs")
+        ol = QVBoxLayout(o)
+        f = QFormLayout()
+        self.rig_path = QLineEdit()
+        self.report_path = QLineEdit()
+        for label, edit, kind in (("Rig file:", self.rig_path, "rig"), ("Report JSON:", self.report_path, "report")):
+            row = QHBoxLayout()
+            row.addWidget(edit, 1)
+            b = QPushButton("…")
+            b.setFixedWidth(30)
+            b.clicked.connect(lambda _=False, k=kind: self._browse(k))
+            row.addWidget(b)
+            f.addRow(label, row)
+        ol.addLayout(f)
+        note = QLabel("The report's tables are also written as CSV beside it (<i>report</i>_intrinsic.csv, "
+                      "_extrinsic_px.csv, …). The rig file carries the ROI and the calibration's provenance.")
+        note.setWordWrap(True)
+        note.setStyleSheet("color: #444444;")
+        ol.addWidget(note)
+        self.summary = QLabel()
+        self.summary.setWordWrap(True)
+        self.summary.setTextFormat(Qt.TextFormat.RichText)
+        self.summary.setAlignment(Qt.AlignmentFlag.AlignTop)
+        ol.addWidget(self.summary, 1)
+        self.message = banner()
+        ol.addWidget(self.message)
+        self.save_btn = QPushButton("Save rig, report and tables")
+        self.save_btn.setMinimumHeight(34)
+        self.save_btn.clicked.connect(self.save)
+        ol.addWidget(self.save_btn)
+        lay.addWidget(o, 2)
+
+        self._timer = QTimer(self)
+        self._timer.setSingleShot(True)
+        self._timer.setInterval(80)  # one redraw after spin-box ticks settle
+        self._timer.timeout.connect(self._draw)
+        self.model.session_changed.connect(self._session)
+        self.model.calibration_changed.connect(self._calibration)
+        self.model.report_changed.connect(self._summary)
+        wizard.busy_changed.connect(lambda b: self._buttons())
+
+    # ------------------------------------------------------------------ state
+    def _session(self) -> None:
+        s = self.model.session
+        self._roi_set = False
+        self._depth_cache.clear()
+        self.pose.blockSignals(True)
+        self.pose.clear()
+        if s is not None:
+            self.pose.addItems([p.name for p in s.poses if p.depth is not None])
+            folder = Path(s.folder)
+            self.rig_path.setText(str(folder / "calibrated.rig.json"))
+            self.report_path.setText(str(folder / "calibration_report.json"))
+            self.pose.setCurrentIndex(self.pose.count() // 2)
+        self.pose.blockSignals(False)
+        self._set_roi(np.array([-0.5, -0.5, 0.2]), np.array([0.5, 0.5, 1.2]))
+        self._buttons()
+
+    def _calibration(self) -> None:
+        cal = self.model.calibration
+        if cal is not None and not self._roi_set:
+            self._roi_set = True
+            self._set_roi(cal.rig.roi_min, cal.rig.roi_max)
+        self._rays = None
+        self._buttons()
+        self._summary()
+        self._schedule()
+
+    def _set_roi(self, lo, hi) -> None:
+        for sp in self.spins.values():
+            sp.blockSignals(True)
+        for j, a in enumerate(AXES):
+            self.spins[f"min_{a}"].setValue(float(lo[j]))
+            self.spins[f"max_{a}"].setValue(float(hi[j]))
+        for sp in self.spins.values():
+            sp.blockSignals(False)
+        self._schedule()
+
+    def roi(self) -> tuple[np.ndarray, np.ndarray]:
+        lo = np.array([self.spins[f"min_{a}"].value() for a in AXES])
+        hi = np.array([self.spins[f"max_{a}"].value() for a in AXES])
+        return lo, hi
+
+    def set_roi(self, lo, hi) -> None:
+        self._set_roi(np.asarray(lo, float), np.asarray(hi, float))
+
+    def _buttons(self) -> None:
+        lo, hi = self.roi()
+        ok_roi = bool(np.all(lo < hi))
+        self.save_btn.setEnabled(not self.wizard.is_busy() and self.model.calibration_ready() and ok_roi)
+        self.fit_btn.setEnabled(self.pose.count() > 0 and self.model.calibration is not None)
+
+    def _summary(self) -> None:
+        from . import results
+
+        cal, rep = self.model.calibration, self.model.report
+        if cal is None:
+            self.summary.setText("Not calibrated yet.")
+            return
+        lines = ["<b>Calibration summary</b>", "<table cellspacing=4>",
+                 "<tr><th align=left>camera</th><th>fx</th><th>error px</th><th>norm.</th></tr>"]
+        for r in results.intrinsic_rows(cal, rep if self.model.report_ready() else None):
+            lines.append(f"<tr><td>{r['camera']}</td><td align=right>{r['fx']:.1f}</td>"
+                         f"<td align=right>{r['px']:.3f}</td><td align=right>{r['normalized']:.3f}</td></tr>")
+        lines.append("</table>")
+        if rep is not None:
+            ex = results.max_cell(results.table(rep, "extrinsic"))
+            de = results.max_cell(results.table(rep, "depth") or {})
+            if ex is not None:
+                lines.append(f"Worst extrinsic error: {ex[2]:.3f} px ({ex[0]} → {ex[1]})")
+            if de is not None:
+                lines.append(f"<br>Worst depth error: {de[2]:.3f} px ({de[0]} → {de[1]})")
+        if self.model.saved_paths:
+            lines.append("<br><br><b>Saved:</b><br>" + "<br>".join(f"{k}: {v}" for k, v in self.model.saved_paths.items()))
+        self.summary.setText("".join(lines))
+
+    # ------------------------------------------------------------------ depth map
+    def _schedule(self, *_) -> None:
+        self._buttons()
+        self._timer.start()
+
+    def _depth_m(self, pose: str) -> np.ndarray | None:
+        from ...core.imageio import read_image
+
+        if pose in self._depth_cache:
+            return self._depth_cache[pose]
+        s = self.model.session
+        try:
+            p = s.pose(pose)
+            d = read_image(p.depth).astype(np.float64) * s.depth_scale
+        except Exception:
+            return None
+        if d.ndim == 3:
+            d = d[:, :, 0]
+        d[~(d > 0)] = np.nan
+        self._depth_cache = {pose: d}
+        return d
+
+    def points(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Rig-frame points (H, W, 3) of the selected pose's depth map and the depth (H, W)."""
+        cal, s = self.model.calibration, self.model.session
+        pose = self.pose.currentText()
+        if cal is None or s is None or not pose or cal.rig.depth_camera is None:
+            return None
+        d = self._depth_m(pose)
+        if d is None:
+            return None
+        cam = cal.rig.depth()
+        if d.shape != (cam.height, cam.width):
+            return None
+        if self._rays is None or self._rays[0] is not cal:
+            self._rays = (cal, cam.rays_cam())  # (H*W, 3) z = 1, through the lens distortion
+        X_cam = self._rays[1] * d.reshape(-1, 1)  # depth maps hold z along the optical axis
+        X = cam.to_rig(X_cam).reshape(cam.height, cam.width, 3)
+        return X, d
+
+    def _draw(self) -> None:
+        lo, hi = self.roi()
+        if not np.all(lo < hi):
+            set_banner(self.roi_msg, "⚠ ROI min must be below max in x, y and z", error=True)
+        else:
+            set_banner(self.roi_msg, "")
+        if self.model.session is not None and self.model.session.depth_camera is None:
+            self.image.setText("This rig has no depth camera: the ROI is stored in the rig file, "
+                               "but there is no depth map to show it on.")
+            return
+        res = self.points()
+        if res is None:
+            self.image.setText("The depth map is shown once the rig is calibrated.")
+            return
+        X, d = res
+        finite = np.isfinite(d)
+        if not finite.any():
+            self.image.setText("the depth map is empty")
+            return
+        lo_d, hi_d = np.nanpercentile(d, [1, 99])
+        norm = np.clip((d - lo_d) / max(hi_d - lo_d, 1e-6), 0, 1)
+        norm = np.nan_to_num(norm, nan=0.0)
+        rgb = cv2.cvtColor(cv2.applyColorMap((norm * 255).astype(np.uint8), cv2.COLORMAP_TURBO),
+                           cv2.COLOR_BGR2RGB).astype(np.float32)
+        with np.errstate(invalid="ignore"):
+            inside = finite & np.all((X >= lo) & (X <= hi), axis=2)
+            below = finite & (X[:, :, 2] > hi[2])
+        outside = finite & ~inside & ~below
+        rgb[outside] = 0.35 * rgb[outside] + 0.65 * np.array([200, 0, 0])
+        rgb[below] = 0.35 * rgb[below] + 0.65 * np.array([20, 90, 255])
+        rgb[~finite] = (40, 40, 40)
+        # the ground plane's trace: the boundary between "above" and "below" ground
+        mask = (np.nan_to_num(X[:, :, 2], nan=-1e9) > hi[2]).astype(np.uint8)
+        edge = cv2.morphologyEx(mask, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)) > 0
+        rgb[edge & finite] = (0, 220, 220)
+        img = np.clip(rgb, 0, 255).astype(np.uint8)
+        self.inside_fraction = float(inside.sum() / max(finite.sum(), 1))
+        pm = qpixmap(img)
+        self._overlay_roi(pm, lo, hi)
+        sz = self.image.size()
+        self.image.setPixmap(pm.scaled(max(sz.width() - 4, 50), max(sz.height() - 4, 50),
+                                       Qt.AspectRatioMode.KeepAspectRatio, Qt.TransformationMode.SmoothTransformation))
+        self.image.setToolTip(f"{100 * self.inside_fraction:.0f} % of the measured pixels inside the ROI")
+
+    def _overlay_roi(self, pm, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Draw the ROI box (yellow) and a 10 cm grid on its ground face z = max z (cyan), projected
+        through the calibrated depth camera, so they show even where the depth map is empty."""
+        from PySide6.QtCore import QPointF
+        from PySide6.QtGui import QColor, QPainter, QPen
+
+        cam = self.model.calibration.rig.depth()
+        p = QPainter(pm)
+        p.setRenderHint(QPainter.RenderHint.Antialiasing)
+
+        def polyline(a, b, pen) -> None:
+            X = np.linspace(a, b, 60)
+            uv, z = cam.project(X)
+            ok = np.isfinite(uv).all(axis=1) & (z > 0)
+            p.setPen(pen)
+            for i in range(len(X) - 1):
+                if ok[i] and ok[i + 1]:
+                    p.drawLine(QPointF(*uv[i]), QPointF(*uv[i + 1]))
+
+        grid = QPen(QColor(0, 220, 220, 170), 1.0)
+        step = 0.1
+        for x in np.arange(np.ceil(lo[0] / step) * step, hi[0] + 1e-9, step):
+            polyline([x, lo[1], hi[2]], [x, hi[1], hi[2]], grid)
+        for y in np.arange(np.ceil(lo[1] / step) * step, hi[1] + 1e-9, step):
+            polyline([lo[0], y, hi[2]], [hi[0], y, hi[2]], grid)
+        box = QPen(QColor(255, 220, 0, 230), 2.0)
+        c = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])])
+        for i, j in ((0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)):
+            polyline(c[i], c[j], box)
+        p.setPen(QColor(0, 230, 230))
+        f = p.font()
+        f.setPixelSize(max(12, pm.height() // 40))
+        f.setBold(True)
+        p.setFont(f)
+        p.drawText(8, pm.height() - 10, f"ground plane z = {hi[2]:.2f} m (cyan grid, 10 cm); ROI box in yellow")
+        p.end()
+
+    def fit_roi(self) -> None:
+        res = self.points()
+        if res is None:
+            return
+        X = res[0].reshape(-1, 3)
+        X = X[np.all(np.isfinite(X), axis=1)]
+        if len(X) < 10:
+            return
+        lo = np.percentile(X, 1, axis=0) - 0.02
+        hi = np.percentile(X, 99, axis=0) + 0.02
+        self._set_roi(np.round(lo, 3), np.round(hi, 3))
+
+    def resizeEvent(self, event) -> None:  # noqa: N802
+        super().resizeEvent(event)
+        self._timer.start()
+
+    def showEvent(self, event) -> None:  # noqa: N802
+        super().showEvent(event)
+        self._summary()
+        self._timer.start()
+
+    # ------------------------------------------------------------------ saving
+    def _browse(self, kind: str) -> None:
+        edit = self.rig_path if kind == "rig" else self.report_path
+        f, _ = QFileDialog.getSaveFileName(self, "Save " + kind, edit.text(), "JSON (*.json)")
+        if f:
+            edit.setText(f)
+
+    def save(self) -> None:
+        lo, hi = self.roi()
+        if not np.all(lo < hi):
+            set_banner(self.message, "⚠ fix the ROI first (min below max)", error=True)
+            return
+        if not self.rig_path.text().strip():
+            set_banner(self.message, "⚠ choose a rig file", error=True)
+            return
+        set_banner(self.message, "")
+        rep = self.report_path.text().strip()
+        self.wizard.save_outputs(Path(self.rig_path.text().strip()), Path(rep) if rep else None, lo, hi)
+
+    def saved(self, paths: dict[str, str]) -> None:
+        set_banner(self.message, "Saved " + ", ".join(paths.values()))
+        self.message.setStyleSheet("QLabel#banner { background: #d4edda; color: #155724; border: 1px solid #a3d3b0;"
+                                   " padding: 4px; border-radius: 3px; }")
+        self._summary()
