@@ -24,7 +24,7 @@ case "$job" in
     rm -rf demo
     .venv/bin/plantreg demo demo
     .venv/bin/plantreg register --rig demo/rig.json --recording demo/recording --target ir --out demo/out
-    echo "demo registered: see demo/out (open it with: .venv/bin/plantreg-gui --demo)"
+    echo "demo registered: see demo/out; view it with: .venv/bin/plantreg-gui --rig demo/rig.json --recording demo/recording --target ir"
     ;;
   test)
     shift || true
