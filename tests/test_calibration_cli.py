@@ -113,6 +113,18 @@ def test_too_few_poses(shared_data, tmp_path, capsys):
     s = _subset(shared_data, tmp_path, ["pose_01", "pose_03"])
     err = _run_fails(s, tmp_path, capsys)
     assert "only 2 usable board pose(s), at least 3" in err
+    assert "(2 images, 0 without a board" in err
+
+
+def test_camera_without_any_image_is_counted_as_none(shared_data, tmp_path, capsys):
+    """A camera listed in session.json but with no image in any pose: the message says it has
+    0 images (not one per pose) and what the files must be called."""
+    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04"])
+    meta = json.loads((s / "session.json").read_text())
+    meta["cameras"]["thermal"] = {"modality": "thermal"}
+    (s / "session.json").write_text(json.dumps(meta))
+    err = _run_fails(s, tmp_path, capsys)
+    assert "camera 'thermal': only 0 usable" in err and "(0 images," in err and "thermal.png" in err
 
 
 def test_unreadable_image(shared_data, tmp_path, capsys):
@@ -136,3 +148,56 @@ def _run_fails_args(session, tmp_path, capsys, extra) -> str:
     code = main(["calibrate", str(session), "--out", str(out / "rig.json"), "--report", str(out / "r.json"), "--quiet", *extra])
     assert code != 0 and list(out.iterdir()) == []
     return capsys.readouterr().err
+
+
+def test_outputs_never_overwrite_the_session(shared_data, tmp_path, capsys):
+    """--out/--report naming session.json or one of the pose images is refused before any work;
+    the session is left as it was."""
+    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04"])
+    before = (s / "session.json").read_bytes(), (s / "pose_01" / "left.jpg").read_bytes()
+    for out, rep in ((s / "session.json", tmp_path / "r.json"), (tmp_path / "rig.json", s / "pose_01" / "left.jpg")):
+        code = main(["calibrate", str(s), "--out", str(out), "--report", str(rep), "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 1 and "would overwrite a file of the session" in err and "Traceback" not in err
+    assert ((s / "session.json").read_bytes(), (s / "pose_01" / "left.jpg").read_bytes()) == before
+    assert not (tmp_path / "rig.json").exists() and not (tmp_path / "r.json").exists()
+
+
+def test_failed_rig_write_leaves_no_report_and_no_traceback(shared_data, tmp_path, capsys, monkeypatch):
+    """The disk fills up while writing the rig file: one error line naming the file, exit 1, and
+    the report/CSVs already written are removed (a report without its rig must not look complete)."""
+    import errno
+
+    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04"])
+    out = tmp_path / "out"
+    out.mkdir()
+
+    def full(self, path):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(Rig, "save", full)
+    code = main(["calibrate", str(s), "--out", str(out / "rig.json"), "--report", str(out / "r.json"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert str(out / "rig.json") in err and "No space left" in err
+    assert list(out.iterdir()) == []
+
+
+def test_output_under_a_file_is_one_clear_line(shared_data, tmp_path, capsys):
+    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04"])
+    (tmp_path / "afile").write_text("x")
+    code = main(["calibrate", str(s), "--out", str(tmp_path / "afile" / "rig.json"),
+                 "--report", str(tmp_path / "r.json"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err and str(tmp_path / "afile") in err
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_provenance_records_this_command_line(stereo_run, shared_data):
+    """The rig's provenance names the calibrate command that made it, also when plantreg is run
+    in-process (here: under pytest, whose sys.argv is not this command)."""
+    code, out = stereo_run
+    prov = Rig.load(out / "rig.json").extra["calibration"]
+    assert prov["command"].startswith(f"plantreg calibrate {shared_data / 'opencv-stereo'} --out ")
+    assert str(out / "report.json") in prov["command"]
+    assert prov["session"] == str((shared_data / "opencv-stereo").resolve())

@@ -168,6 +168,19 @@ def test_session_errors_name_the_file(tmp_path):
                                                         "cameras": {"a": {}}, "depth": {"camera": "x"}}))
     with pytest.raises(InputError, match="depth camera 'x'"):
         Session.load(tmp_path)
+    # a hand-edited review block of the wrong shape: a clear error, not a traceback (options) or
+    # a string silently iterated character by character (excluded)
+    board = {"type": "chessboard", "columns": 9, "rows": 6, "square_size": 0.02}
+    for bad_board in ({"columns": 8.5}, {"rows": True}):
+        (tmp_path / "session.json").write_text(json.dumps({"board": {**board, **bad_board}, "cameras": {"a": {}}}))
+        with pytest.raises(InputError, match="whole number of inner corners"):
+            Session.load(tmp_path)
+    for review, words in (({"options": ["pose_01:a"]}, "review.options"),
+                          ({"excluded": "pose_01:a"}, "review.excluded"), ([1], "review")):
+        (tmp_path / "session.json").write_text(json.dumps({"board": board, "cameras": {"a": {}}, "review": review}))
+        with pytest.raises(InputError, match=words) as e:
+            Session.load(tmp_path)
+        assert "session.json" in str(e.value)
 
 
 def test_charuco_session_end_to_end(tmp_path):

@@ -66,6 +66,14 @@ def test_rig_roundtrip_keeps_unknown_keys(tmp_path):
     (lambda d: d.update(depth={"camera": "rgb"}), "depth camera 'rgb'"),
     (lambda d: d["cameras"][0].update(K=[[1, 0], [0, 1]]), "K must be"),
     (lambda d: d["cameras"][0].update(dist=[0, 0, 0]), "dist has 3"),
+    # a string or null where a number belongs, NaN, a fractional pixel count: clean errors, no traceback
+    (lambda d: d["depth"].update(scale="abc"), "depth.scale must be a number"),
+    (lambda d: d["depth"].update(scale=None), "depth.scale must be a number"),
+    (lambda d: d.update(version="one"), "version must be"),
+    (lambda d: d["cameras"][0].update(dist=[float("nan"), 0, 0, 0, 0]), "finite"),
+    (lambda d: d["cameras"][0].update(t=[0, float("inf"), 0]), "finite"),
+    (lambda d: d["cameras"][0].update(width=10.5), "whole numbers"),
+    (lambda d: d.update(roi={"min": [0, 0, float("nan")], "max": [1, 1, 1]}), "roi"),
 ])
 def test_bad_rig_files_name_the_file(tmp_path, mutate, words):
     d = {"depth": {"camera": "ir"}, "cameras": [{"name": "ir", "width": 10, "height": 10,
@@ -76,3 +84,19 @@ def test_bad_rig_files_name_the_file(tmp_path, mutate, words):
     with pytest.raises(InputError) as e:
         Rig.load(p)
     assert str(p) in str(e.value) and words in str(e.value)
+
+
+@pytest.mark.parametrize("planar", ["contig", "separate"])
+def test_multiband_tiff_is_band_last_in_either_layout(tmp_path, planar):
+    """A 5-band 40 x 30 TIFF reads as (40, 30, 5) whether its samples are pixel-interleaved or
+    band-separate (GDAL's INTERLEAVE=BAND), with each band's values where they were written."""
+    import tifffile
+
+    from plantreg_gui.core.imageio import read_image
+
+    cube = np.arange(40 * 30 * 5, dtype=np.float32).reshape(40, 30, 5)
+    data = cube if planar == "contig" else np.moveaxis(cube, -1, 0)
+    tifffile.imwrite(tmp_path / "c.tif", np.ascontiguousarray(data), planarconfig=planar, photometric="minisblack")
+    back = read_image(tmp_path / "c.tif")
+    assert back.shape == (40, 30, 5)
+    np.testing.assert_array_equal(back, cube)

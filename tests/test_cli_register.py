@@ -99,8 +99,35 @@ def _bad_manifest(root, rig, rec):
     return rig, rec, "ir", rec / "recording.json", ["not valid JSON"]
 
 
+def _binary_manifest(root, rig, rec):
+    (rec / "recording.json").write_bytes(b"\xff\xfe\x00 not text")
+    return rig, rec, "ir", rec / "recording.json", ["cannot read"]
+
+
+def _image_is_a_folder(root, rig, rec):
+    (rec / "recording.json").write_text(json.dumps(
+        {"depth": "depth.png", "images": {"ir": "ir.npy", "thermal": "sub", "rgb": "rgb.png"}}))
+    (rec / "sub").mkdir()
+    return rig, rec, "ir", rec / "sub", ["thermal", "folder"]
+
+
+def _complex_depth(root, rig, rec):
+    np.save(rec / "depth.npy", np.full((H, W), 1000, np.complex64))
+    (rec / "recording.json").write_text(json.dumps(
+        {"depth": "depth.npy", "images": {"ir": "ir.npy", "thermal": "thermal.tif", "rgb": "rgb.png"}}))
+    return rig, rec, "ir", rec / "depth.npy", ["real numbers"]
+
+
+def _rig_scale_not_a_number(root, rig, rec):
+    d = json.loads(rig.read_text())
+    d["depth"]["scale"] = "1 mm"
+    rig.write_text(json.dumps(d))
+    return rig, rec, "ir", rig, ["depth.scale must be a number"]
+
+
 BAD = [_missing_rig, _missing_image, _wrong_size, _unknown_target, _empty_depth, _no_depth_camera,
-       _unreadable_image, _depth_wrong_size, _bad_manifest]
+       _unreadable_image, _depth_wrong_size, _bad_manifest, _binary_manifest, _image_is_a_folder,
+       _complex_depth, _rig_scale_not_a_number]
 
 
 @pytest.mark.parametrize("breaker", BAD, ids=[b.__name__.strip("_") for b in BAD])
@@ -133,6 +160,81 @@ def test_existing_output_is_refused_before_any_work(tmp_path, capsys, monkeypatc
     err = capsys.readouterr().err
     assert code == 1 and str(out) in err and "not empty" in err and "--overwrite" in err
     assert [p.name for p in out.iterdir()] == ["mine.txt"]
+
+
+@pytest.mark.parametrize("where", ["recording", "parent"])
+def test_overwrite_never_replaces_the_inputs(tmp_path, capsys, monkeypatch, where):
+    """--out pointing at the recording folder (or a folder holding it and the rig) with --overwrite
+    must be refused before any work: replacing it would delete the user's data."""
+    rig, rec = _write_inputs(tmp_path)
+    before = sorted(p.name for p in rec.iterdir())
+
+    def never(*a, **k):
+        raise AssertionError("registration must not start")
+
+    monkeypatch.setattr(register_mod, "Registrar", never)
+    out = rec if where == "recording" else tmp_path
+    code = cli.main(_args(rig, rec, out, "ir", "--overwrite"))
+    err = capsys.readouterr().err
+    assert code == 1 and "would replace an input" in err and "Traceback" not in err
+    assert sorted(p.name for p in rec.iterdir()) == before and rig.is_file()
+
+
+def test_output_under_a_file_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    rig, rec = _write_inputs(tmp_path)
+
+    def never(*a, **k):
+        raise AssertionError("registration must not start")
+
+    monkeypatch.setattr(register_mod, "Registrar", never)
+    code = cli.main(_args(rig, rec, rig / "out"))  # the rig file is not a folder
+    err = capsys.readouterr().err
+    assert code == 1 and str(rig) in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_os_error_while_writing_is_one_line(tmp_path, capsys, monkeypatch):
+    """Disk full / no permission while writing: one line naming the file, exit 1, no folder left."""
+    import errno
+
+    from plantreg_gui.core import export
+
+    rig, rec = _write_inputs(tmp_path)
+    monkeypatch.setattr(register_mod, "Registrar", _FakeRegistrar)
+
+    def full(path, img):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(export, "write_tiff", full)
+    out = tmp_path / "out"
+    code = cli.main(_args(rig, rec, out))
+    err = capsys.readouterr().err
+    assert code == 1 and "No space left" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]
+
+
+def test_recording_given_as_its_manifest(tmp_path, capsys, monkeypatch):
+    """--recording DIR/recording.json means DIR (as calibrate accepts SESSION/session.json),
+    not 'recording folder not found' for a file that exists."""
+    rig, rec = _write_inputs(tmp_path)
+    monkeypatch.setattr(register_mod, "Registrar", _FakeRegistrar)
+    code = cli.main(_args(rig, rec / "recording.json", tmp_path / "out"))
+    assert code == 0, capsys.readouterr().err
+    assert _FakeRegistrar.seen["recording"].folder == rec
+
+
+def test_recording_without_images_still_writes_cases(tmp_path, capsys):
+    """A recording with only a depth map: no registered images, but case maps, areas and a point
+    cloud (grey) -- not a StopIteration traceback from picking the colour camera."""
+    rig, rec = _write_inputs(tmp_path)
+    (rec / "recording.json").write_text(json.dumps({"depth": "depth.png", "images": {}}))
+    out = tmp_path / "out"
+    code = cli.main(_args(rig, rec, out))
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert (out / "areas.png").is_file() and (out / "cases" / "thermal.png").is_file()
+    assert not (out / "registered").exists()
+    ply = PlyData.read(str(out / "pointcloud.ply"))
+    assert ply["vertex"].count == H * W  # flat depth at 1 m, every ir ray hits
 
 
 def test_bad_edge_angle(tmp_path, capsys):

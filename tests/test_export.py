@@ -211,6 +211,27 @@ def test_existing_output_is_refused_and_replaced_only_on_request(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
+def test_overwrite_never_replaces_the_rig_or_recording(tmp_path):
+    """An export into the folder that holds the rig file (as the GUI passes it: a str) or the
+    recording is refused even with overwrite: replacing the folder would delete the inputs."""
+    from plantreg_gui.core.recording import Recording
+
+    rig, res = _result()
+    rig_path = tmp_path / "rig.json"
+    rig.save(rig_path)
+    with pytest.raises(InputError, match="would replace an input"):
+        write_outputs(res, rig, None, tmp_path, what={"areas"}, overwrite=True, inputs={"rig": str(rig_path)})
+    rec_dir = tmp_path / "rec"
+    rec_dir.mkdir()
+    (rec_dir / "recording.json").write_text("{}")
+    rec = Recording(rec_dir, None, {})
+    with pytest.raises(InputError, match="would replace an input"):
+        write_outputs(res, rig, rec, rec_dir, what={"areas"}, overwrite=True)
+    assert rig_path.is_file() and (rec_dir / "recording.json").is_file()
+    write_outputs(res, rig, rec, rec_dir / "out", what={"areas"}, inputs={"rig": str(rig_path)})  # inside: fine
+    assert (rec_dir / "out" / "areas.png").is_file()
+
+
 def test_subset_of_outputs(tmp_path):
     rig, res = _result()
     out = write_outputs(res, rig, None, tmp_path / "o", what={"cases", "summary"})

@@ -46,6 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    # the words of this command line, for provenance (sys.argv is someone else's when called in-process)
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     try:
         return int(args.run(args) or 0)
     except Cancelled:
@@ -59,6 +61,10 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except MemoryError:
         print("plantreg: error: out of memory", file=sys.stderr)
+        return 1
+    except OSError as e:  # disk full, no permission, a file where a folder should be: name it, no traceback
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"plantreg: error: {where}{e.strerror or e}", file=sys.stderr)
         return 1
 
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import shlex
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -68,7 +67,7 @@ def _parse_excludes(items: list[str], session) -> set[tuple[str, str]]:
 def _check_output(path: Path, what: str) -> None:
     if path.exists() and path.is_dir():
         raise InputError(f"{what} path is a folder, expected a file name", path)
-    if not path.parent.exists():
+    if not path.parent.is_dir():
         raise InputError(f"folder of the {what} does not exist", path.parent)
 
 
@@ -90,6 +89,11 @@ def run(args: argparse.Namespace) -> int:
     _check_output(args.report, "report")
     if args.out.resolve() == args.report.resolve():
         raise InputError("--out and --report must be different files", args.out)
+    inputs = {session.path.resolve()} | {f.resolve() for pose in session.poses
+                                         for f in [*pose.images.values(), *([pose.depth] if pose.depth else [])]}
+    for path, what in ((args.out, "--out"), (args.report, "--report")):
+        if path.resolve() in inputs:
+            raise InputError(f"{what} would overwrite a file of the session; choose another file name", path)
 
     options = None
     if args.detector != "auto":
@@ -103,11 +107,18 @@ def run(args: argparse.Namespace) -> int:
                 options[(pose.name, cam)] = DetectOptions(o.invert, o.enhance, args.detector)
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
     detections, cal, report = run_session(session, excluded, options, roi, progress)
-    command = "plantreg calibrate " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if len(sys.argv) > 2 else None
+    words = getattr(args, "argv", None)
+    command = "plantreg " + " ".join(shlex.quote(str(a)) for a in words) if words else None
     rig = calibrated_rig(cal, session, report, roi, command, excluded)
     # everything is computed: now write (each file atomically; the rig last)
-    written = write_report(report, args.report)
-    rig.save(args.out)
+    written: list[Path] = []
+    try:
+        written = write_report(report, args.report)
+        rig.save(args.out)
+    except BaseException:
+        for p in written:  # a report without its rig (disk full, Ctrl-C) must not look complete
+            p.unlink(missing_ok=True)
+        raise
 
     _print_summary(session, detections, cal, report)
     print(f"wrote {args.out}")

@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from .. import cli
-    from ..core.export import write_outputs
+    from ..core.export import check_output_spares_inputs, write_outputs
     from ..core.recording import Recording
     from ..core.register import AREA_P4, AREA_P5, AREA_P6, Registrar, RegistrationParams
     from ..core.rig import Rig
@@ -63,8 +63,14 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"--edge-angle must be between 0 and 90 degrees, got {args.edge_angle:g}")
         params.edge_angle_deg = float(args.edge_angle)
     # fail before the long work, not after it
+    check_output_spares_inputs(out, [rig_path, args.recording])
     if out.exists() and not out.is_dir():
         raise InputError("output path exists and is not a folder", out)
+    parent = out.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise InputError("output folder cannot be made: this is a file, not a folder", parent)
     if out.is_dir() and any(out.iterdir()) and not args.overwrite:
         raise InputError("output folder exists and is not empty (choose another, or pass --overwrite)", out)
     recording = Recording.load(args.recording, rig)

@@ -165,6 +165,10 @@ class Camera:
             width, height = int(d["width"]), int(d["height"])
         except (TypeError, ValueError) as e:
             raise ValueError(f"camera '{name}': non-numeric value ({e})") from None
+        if width != float(d["width"]) or height != float(d["height"]):  # int() would silently truncate 639.5
+            raise ValueError(f"camera '{name}': width and height must be whole numbers of pixels")
+        if not (np.all(np.isfinite(dist)) and np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+            raise ValueError(f"camera '{name}': dist, R and t must be finite numbers (no NaN or infinity)")
         if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
             raise ValueError(f"camera '{name}': K must be a 3x3 matrix with positive focal lengths")
         if dist.size not in (0, 4, 5, 8, 12, 14):

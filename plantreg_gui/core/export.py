@@ -29,6 +29,7 @@ import numpy as np
 
 from .. import __version__
 from . import display
+from .errors import InputError
 from .imageio import atomic_output_dir, atomic_path_suffixed, atomic_write_text, write_png, write_tiff
 from .progress import Reporter, ensure_reporter
 from .recording import Recording
@@ -101,10 +102,15 @@ def write_outputs(
         steps.append(("areas", 0.3))
     if "pointcloud" in sel:
         steps.append(("pointcloud", 2.0 + 0.05 * sum(_bands(result.registered[c]) for c in cams)))
-    if "mosaic" in sel:
+    if "mosaic" in sel and cams:  # a recording with a depth map only has nothing to tile
         steps.append(("mosaic", 1.0))
     total = sum(w for _, w in steps) or 1.0
 
+    keep: list[Path] = [Path(v) for k, v in (inputs or {}).items()
+                        if isinstance(v, Path) or (k == "rig" and isinstance(v, str))]
+    if recording is not None and recording.folder is not None:
+        keep += [Path(recording.folder), *map(Path, recording.paths.values())]
+    check_output_spares_inputs(out, keep)
     with atomic_output_dir(out, overwrite) as tmp:
         done = 0.0
         for step, weight in steps:
@@ -126,7 +132,8 @@ def write_outputs(
             elif kind == "pointcloud":
                 rel = "pointcloud.ply"
                 colour_cam = _colour_camera(result, rig)
-                write_ply(tmp / rel, result, cams, preview(colour_cam), rep.sub(done / total, (done + weight) / total))
+                write_ply(tmp / rel, result, cams, None if colour_cam is None else preview(colour_cam),
+                          rep.sub(done / total, (done + weight) / total))
             elif kind == "mosaic":
                 rel = "mosaic.png"
                 write_png(tmp / rel, display.mosaic([preview(c) for c in cams], display.default_tile((H, W))))
@@ -145,6 +152,17 @@ def write_outputs(
     if not rep.cancel.cancelled:  # the folder is complete now: a late cancel changes nothing
         rep(1.0, f"wrote {out}")
     return out
+
+
+def check_output_spares_inputs(out: str | Path, inputs: Iterable[str | Path]) -> None:
+    """Raise :class:`InputError` if the output folder ``out`` is, or contains, one of ``inputs``
+    (files or folders): replacing it (``overwrite``) would delete the user's recording or rig."""
+    out_r = Path(out).resolve()
+    for p in inputs:
+        p_r = Path(p).resolve()
+        if p_r == out_r or out_r in p_r.parents:
+            raise InputError(f"the output folder would replace an input ({p}); choose an output folder "
+                             "outside the recording and the rig file's folder", out)
 
 
 # ---------------------------------------------------------------------- registered images
@@ -359,14 +377,15 @@ def _camera_order(result: RegistrationResult, rig: Rig) -> list[str]:
     return order
 
 
-def _colour_camera(result: RegistrationResult, rig: Rig) -> str:
-    """The camera whose display rendering colours the point cloud: the rgb camera, else the target."""
+def _colour_camera(result: RegistrationResult, rig: Rig) -> str | None:
+    """The camera whose display rendering colours the point cloud: the rgb camera, else the target
+    (None when no camera has an image)."""
     for c in rig.cameras:
         if display.canonical_modality(c.modality) == "rgb" and c.name in result.registered:
             return c.name
     if result.target in result.registered:
         return result.target
-    return next(iter(result.registered))
+    return next(iter(result.registered), None)
 
 
 def _step_label(kind: str, cam: str) -> str:

@@ -46,7 +46,14 @@ def read_image(path: str | Path) -> np.ndarray:
         elif suffix in (".tif", ".tiff"):
             import tifffile
 
-            img = tifffile.imread(path)
+            with tifffile.TiffFile(path) as tf:
+                series = tf.series[0]
+                img = series.asarray()
+                axes = series.axes
+            if img.ndim == 3 and axes.endswith("SYX"):
+                # planar-separate multi-band TIFF (GDAL's INTERLEAVE=BAND): tifffile gives bands
+                # first; plantreg's arrays are band-last
+                img = np.moveaxis(img, 0, -1)
         elif suffix == ".hdr":
             import spectral.io.envi as envi
 

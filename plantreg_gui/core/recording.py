@@ -43,6 +43,8 @@ class Recording:
     def load(cls, folder: str | Path, rig: Rig | None = None) -> "Recording":
         """Read a recording folder; with ``rig``, check it against the rig (names and sizes)."""
         folder = Path(folder)
+        if folder.is_file() and folder.name == MANIFEST:  # the manifest itself was given
+            folder = folder.parent
         manifest = folder / MANIFEST
         if not folder.is_dir():
             raise InputError("recording folder not found", folder)
@@ -52,12 +54,16 @@ class Recording:
             m = json.loads(manifest.read_text(encoding="utf-8"))
         except json.JSONDecodeError as e:
             raise InputError(f"not valid JSON (line {e.lineno}: {e.msg})", manifest) from None
+        except (OSError, UnicodeDecodeError) as e:
+            raise InputError(f"cannot read ({e})", manifest) from None
         if not isinstance(m, dict) or not isinstance(m.get("images", {}), dict):
             raise InputError("expected {\"depth\": FILE, \"images\": {CAMERA: FILE}}", manifest)
         paths: dict[str, Path] = {}
         images: dict[str, np.ndarray] = {}
         for name, rel in m.get("images", {}).items():
             p = folder / str(rel)
+            if p.is_dir():
+                raise InputError(f"image of camera '{name}' listed in {MANIFEST} is a folder, not a file", p)
             if not p.is_file():
                 raise InputError(f"image of camera '{name}' listed in {MANIFEST} is missing", p)
             images[str(name)] = read_image(p)
@@ -65,12 +71,16 @@ class Recording:
         depth = None
         if m.get("depth"):
             p = folder / str(m["depth"])
+            if p.is_dir():
+                raise InputError(f"depth map listed in {MANIFEST} is a folder, not a file", p)
             if not p.is_file():
                 raise InputError(f"depth map listed in {MANIFEST} is missing", p)
             depth = read_image(p)
             paths["depth"] = p
             if depth.ndim != 2:
                 raise InputError(f"depth map must be single-channel, got shape {depth.shape}", p)
+            if depth.dtype.kind not in "uif":
+                raise InputError(f"depth map must hold real numbers, got dtype {depth.dtype}", p)
         extra = {k: v for k, v in m.items() if k not in ("depth", "images")}
         rec = cls(folder, depth, images, paths, extra)
         if rig is not None:

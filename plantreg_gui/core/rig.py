@@ -91,7 +91,10 @@ class Rig:
             raise bad("not a rig file (the top level must be a JSON object)")
         if d.get("format", FORMAT) != FORMAT:
             raise bad(f"format is '{d.get('format')}', expected '{FORMAT}'")
-        if int(d.get("version", VERSION)) > VERSION:
+        version = d.get("version", VERSION)
+        if isinstance(version, bool) or not isinstance(version, (int, float)) or not float(version).is_integer():
+            raise bad(f"version must be a whole number, got {version!r}")
+        if version > VERSION:
             raise bad(f"rig file version {d.get('version')} is newer than this plantreg reads ({VERSION})")
         cams = d.get("cameras")
         if not isinstance(cams, list) or not cams:
@@ -116,8 +119,11 @@ class Rig:
             depth_camera = str(depth["camera"])
             if depth_camera not in names:
                 raise bad(f"depth camera '{depth_camera}' is not among the cameras ({', '.join(names)})")
-            scale = float(depth.get("scale", 0.001))
-            if not scale > 0:
+            try:
+                scale = float(depth.get("scale", 0.001))
+            except (TypeError, ValueError):
+                raise bad(f"depth.scale must be a number (metres per depth unit), got {depth.get('scale')!r}") from None
+            if not (scale > 0 and np.isfinite(scale)):
                 raise bad("depth.scale must be positive (metres per depth unit)")
         roi = d.get("roi", {})
         try:
@@ -125,7 +131,8 @@ class Rig:
             roi_max = np.asarray(roi.get("max", [0.5, 0.5, 1.2]), dtype=np.float64)
         except (TypeError, ValueError, AttributeError):
             raise bad("roi must be {\"min\": [x, y, z], \"max\": [x, y, z]}") from None
-        if roi_min.shape != (3,) or roi_max.shape != (3,) or not np.all(roi_min < roi_max):
+        if (roi_min.shape != (3,) or roi_max.shape != (3,) or not np.all(roi_min < roi_max)
+                or not np.all(np.isfinite(roi_min)) or not np.all(np.isfinite(roi_max))):
             raise bad("roi min must be below max in x, y and z")
         extra = {k: v for k, v in d.items() if k not in ("format", "version", "depth", "roi", "cameras")}
         return cls(cameras, depth_camera, scale, roi_min, roi_max, extra)

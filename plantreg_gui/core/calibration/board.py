@@ -157,6 +157,9 @@ class Board:
         missing = [k for k in ("columns", "rows", "square_size") if k not in d]
         if missing:
             raise ValueError(f"board lacks {', '.join(missing)}")
+        for k in ("columns", "rows"):  # int() would silently make 8.5 corners 8
+            if isinstance(d[k], (bool, float)) and not (isinstance(d[k], float) and d[k].is_integer()):
+                raise ValueError(f"board: {k} must be a whole number of inner corners, got {d[k]!r}")
         try:
             return cls(
                 type=str(d.get("type", "chessboard")),

@@ -37,7 +37,7 @@ from ..errors import InputError
 from ..progress import Reporter, ensure_reporter
 from ..rig import Rig
 from .board import Board
-from .detect import FOUND, Detection, check_image_sizes, suggest_board_size
+from .detect import FOUND, MISSING, Detection, check_image_sizes, suggest_board_size
 from .session import Session
 
 MIN_VIEWS = 3
@@ -299,11 +299,13 @@ def usable_views(session: Session, detections: dict[tuple[str, str], Detection],
 
 def _too_few_message(session: Session, cam: str, views: dict[str, Detection],
                      detections: dict[tuple[str, str], Detection], excluded) -> str:
-    mine = {p: d for (p, c), d in detections.items() if c == cam}
+    mine = {p: d for (p, c), d in detections.items() if c == cam and d.status != MISSING}
     failed = [d for d in mine.values() if d.status == "failed"]
     n_ex = sum(1 for (p, c) in excluded if c == cam)
     msg = (f"camera '{cam}': only {len(views)} usable board pose(s), at least {MIN_VIEWS} are needed "
            f"({len(mine)} images, {len(failed)} without a board, {n_ex} excluded)")
+    if not mine:
+        msg += f". No pose folder has an image named after the camera ('{cam}.png', '{cam}.tif', ...)"
     if not views and failed and session.board.type == "chessboard":
         from ..imageio import read_image
 

@@ -190,7 +190,11 @@ class Session:
                 raise InputError("depth.scale must be positive (metres per depth unit)", path)
         review = d.get("review") or {}
         if not isinstance(review, dict):
-            review = {}
+            raise InputError("\"review\" must be an object {\"excluded\": [\"POSE:CAMERA\", ...], \"options\": {...}}", path)
+        if not isinstance(review.get("excluded", []), list):
+            raise InputError("review.excluded must be a list of \"POSE:CAMERA\" strings", path)
+        if not isinstance(review.get("options", {}), dict):
+            raise InputError("review.options must be an object {\"POSE:CAMERA\": {...}}", path)
         extra = {k: v for k, v in d.items() if k not in ("board", "depth", "cameras", "review")}
         s = cls(folder, board, cameras, depth_camera, depth_scale, [], review, extra)
         s.rescan()
