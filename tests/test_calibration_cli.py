@@ -201,3 +201,29 @@ def test_provenance_records_this_command_line(stereo_run, shared_data):
     assert prov["command"].startswith(f"plantreg calibrate {shared_data / 'opencv-stereo'} --out ")
     assert str(out / "report.json") in prov["command"]
     assert prov["session"] == str((shared_data / "opencv-stereo").resolve())
+
+
+def test_depth_session_without_roi_says_the_ground_plane_is_a_default(demo_dir, tmp_path, capsys):
+    """A calibration cannot know where the ground is: without --roi the rig gets the default box
+    and the CLI says so; with --roi the rig carries exactly that box."""
+    src = demo_dir / "calibration"
+    session = tmp_path / "session"
+    session.mkdir()
+    shutil.copy(src / "session.json", session / "session.json")
+    for pose in sorted(p for p in src.iterdir() if p.is_dir())[:6]:
+        shutil.copytree(pose, session / pose.name)
+    assert json.loads((session / "session.json").read_text())["depth"]["camera"] == "ir"
+
+    assert main(["calibrate", str(session), "--out", str(tmp_path / "a.json"),
+                 "--report", str(tmp_path / "a_report.json"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    rig = Rig.load(tmp_path / "a.json")
+    assert "no --roi given" in err and f"z = {rig.roi_max[2]:g} m" in err
+
+    roi = ["-0.4", "-0.3", "0.3", "0.4", "0.3", "1.17"]
+    assert main(["calibrate", str(session), "--out", str(tmp_path / "b.json"),
+                 "--report", str(tmp_path / "b_report.json"), "--quiet", "--roi", *roi]) == 0
+    err = capsys.readouterr().err
+    rig = Rig.load(tmp_path / "b.json")
+    assert "no --roi" not in err
+    assert rig.roi_min.tolist() == [-0.4, -0.3, 0.3] and rig.roi_max.tolist() == [0.4, 0.3, 1.17]

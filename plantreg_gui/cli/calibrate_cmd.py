@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -121,6 +122,13 @@ def run(args: argparse.Namespace) -> int:
         raise
 
     _print_summary(session, detections, cal, report)
+    if roi is None and rig.depth_camera is not None:
+        # a calibration cannot know where the ground is; registration meshes everything above it
+        lo, hi = rig.roi_min, rig.roi_max
+        print(f"note: no --roi given, so {args.out} has the default region of interest "
+              f"x {lo[0]:g}..{hi[0]:g}, y {lo[1]:g}..{hi[1]:g}, z {lo[2]:g}..{hi[2]:g} m with the ground plane "
+              f"at z = {hi[2]:g} m; set your rig's with --roi (or the wizard's Save page) before registering",
+              file=sys.stderr)
     print(f"wrote {args.out}")
     for p in written:
         print(f"wrote {p}")
