@@ -209,7 +209,7 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
 
 
 # ---------------------------------------------------------------------- the real OpenCV stereo set
-def test_opencv_stereo_reaches_saved_rig_pair_02_worst(qtbot, shared_data, tmp_path):
+def test_opencv_stereo_reaches_saved_rig_pair_02_worst(qtbot, shared_data, tmp_path, monkeypatch):
     from plantreg_gui.core.rig import Rig
 
     folder = tmp_path / "stereo"
@@ -232,9 +232,21 @@ def test_opencv_stereo_reaches_saved_rig_pair_02_worst(qtbot, shared_data, tmp_p
         assert w.pages[5].message.isVisible() and "no depth camera" in w.pages[5].message.text()
         w.go_to_page(7)
         out = tmp_path / "stereo.rig.json"
+        # an existing rig file (someone's calibration) is never replaced without asking
+        out.write_text('{"previous": "calibration"}\n')
+        answers, asked = [QMessageBox.StandardButton.No], []
+        monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: asked.append(a[2]) or answers[0])
         w.pages[6].rig_path.setText(str(out))
+        w.pages[6].save()
+        assert len(asked) == 1 and str(out) in asked[0]
+        assert not w.is_busy() and out.read_text() == '{"previous": "calibration"}\n'
+        answers[0] = QMessageBox.StandardButton.Yes
         with qtbot.waitSignal(w.saved, timeout=60000):
             w.pages[6].save()
+        assert len(asked) == 2
+        with qtbot.waitSignal(w.saved, timeout=60000):
+            w.pages[6].save()  # saving again over its own output does not ask again
+        assert len(asked) == 2
         rig = Rig.load(out)
         assert abs(rig.camera("left").K[0, 0] - 535.9) < 535.9 * 0.02
         assert rig.depth_camera is None
@@ -357,4 +369,30 @@ def test_opening_another_session_during_detection(qtbot, demo_dir, shared_data, 
         assert set(w.model.detections) == {(p, c) for p in names for c in ("left", "right")}
         assert all(d.status == "found" for d in w.model.detections.values())
     finally:
+        _close(w)
+
+
+def test_load_demo_writes_only_the_calibration_session(qtbot, demo_dir, tmp_path):
+    """``--calibrate-demo`` renders the session `plantreg demo` writes into ``calibration/`` —
+    the same boards, cameras and truth — and not the registration demo's recording and ground
+    truth, which only slowed the wizard's start (about half of its start-up)."""
+    w = _wizard(qtbot)
+    try:
+        w.load_demo(tmp_path / "demo")
+        qtbot.waitUntil(lambda: w.model.session is not None, timeout=WAIT_MS)
+        session = tmp_path / "demo" / "calibration"
+        assert Path(w.model.session.folder) == session
+        assert sorted(p.name for p in (tmp_path / "demo").iterdir()) == ["calibration"]
+        ref = demo_dir / "calibration"
+        for name in ("session.json", "truth.json"):
+            got, want = json.loads((session / name).read_text()), json.loads((ref / name).read_text())
+            got.pop("review", None)
+            want.pop("review", None)
+            assert got == want, name
+        assert sorted(p.name for p in session.iterdir()) == sorted(p.name for p in ref.iterdir())
+        from plantreg_gui.core.imageio import read_image
+
+        np.testing.assert_array_equal(read_image(session / "pose_03" / "ir.png"), read_image(ref / "pose_03" / "ir.png"))
+    finally:
+        w.cancel()
         _close(w)

@@ -208,6 +208,36 @@ def test_mosaic_blend_flicker(ws):
     assert not m._flick_timer.isActive()
 
 
+def test_mosaic_enables_only_controls_that_change_the_picture(ws):
+    """In every mode, a control is enabled exactly when moving it changes what is shown."""
+    m = ws.mosaic_view
+    ws.set_view("mosaic")
+    controls = {
+        "A": (m.a, lambda: m.a.setCurrentIndex((m.a.currentIndex() + 1) % m.a.count())),
+        "B": (m.b, lambda: m.b.setCurrentIndex((m.b.currentIndex() + 2) % m.b.count())),
+        "tile": (m.tile, lambda: m.tile.setValue(m.tile.value() + 17)),
+        "blend": (m.alpha, lambda: m.alpha.setValue((m.alpha.value() + 30) % 100)),
+    }
+    try:
+        for mode in ("mosaic", "checkerboard", "blend"):
+            m.set_mode(mode)
+            for name, (widget, move) in controls.items():
+                m.a.setCurrentText("thermal")
+                m.b.setCurrentText("rgb")
+                m.alpha.setValue(50)
+                before = m.composite().copy()
+                move()
+                changed = not np.array_equal(m.composite(), before)
+                assert widget.isEnabled() == changed, (mode, name, widget.isEnabled(), changed)
+        m.set_mode("blend")
+        m.flicker.setChecked(True)  # flicker shows A or B whole: only A and B matter
+        assert m.a.isEnabled() and m.b.isEnabled()
+        assert not m.tile.isEnabled() and not m.alpha.isEnabled()
+    finally:
+        m.flicker.setChecked(False)
+        m.set_mode("mosaic")
+
+
 def test_mask_overlays_and_legend_counts(ws):
     from PySide6.QtCore import Qt
 
@@ -310,6 +340,34 @@ def test_export_writes_files_and_asks_before_overwriting(ws, qapp, tmp_path, mon
     assert sorted(p.name for p in out.iterdir()) == ["areas.png", "summary.json"]
 
 
+def test_export_dialog_needs_a_folder_and_a_part(qapp, tmp_path):
+    """An empty folder field would export into (and offer to replace) the current directory;
+    nothing ticked would write an empty folder: Export stays disabled until both are given."""
+    from PySide6.QtWidgets import QDialogButtonBox
+
+    from plantreg_gui.gui.registration.export_dialog import PARTS, ExportDialog
+
+    dlg = ExportDialog(tmp_path / "out")
+    ok = dlg.buttons.button(QDialogButtonBox.StandardButton.Ok)
+    try:
+        assert ok.isEnabled() and dlg.what() == list(PARTS)
+        dlg.folder.setText("   ")
+        assert not ok.isEnabled()
+        dlg.folder.setText(str(tmp_path / "out2"))
+        assert ok.isEnabled() and dlg.out() == tmp_path / "out2"
+        for cb in dlg.boxes.values():
+            cb.setChecked(False)
+        assert not ok.isEnabled()
+        dlg.boxes["summary"].setChecked(True)
+        assert ok.isEnabled() and dlg.what() == ["summary"]
+    finally:
+        dlg.deleteLater()
+
+
+def test_export_proposes_a_folder_beside_the_recording(ws, demo_dir):
+    assert ws.default_export_folder() == demo_dir / "registered-ir"
+
+
 def test_recent_files_remember_what_was_opened(ws, demo_dir):
     rec = ws.recent()
     assert f"recording:{demo_dir / 'recording'}" in rec
@@ -402,6 +460,11 @@ def test_plant3d_opens_in_the_workspace_with_a_banner(qapp, shared_data):
         assert "No calibration ships with this data set: registration needs a rig file" in w.banner.text()
         assert set(w.raw_grid.views) == {"depth", "ir", "thermal", "hs render", "hs pca"}
         assert not w.register_button.isEnabled()
+        # the views that need a registration say why they are empty instead of a blank pane
+        for key in ("side-by-side", "mosaic", "masks"):
+            assert not w.empty_notes[key].isHidden()
+            assert "no calibration ships with this data set" in w.empty_notes[key].text()
+        assert w.empty_notes["raw"].isHidden() and w.empty_notes["3d"].isHidden()
         th = w.plant.images["thermal"]
         w.raw_grid.views["thermal"].view.hovered.emit(100, 200)
         assert f"{th[100, 200]:.2f} °C" in w.readout.text()
@@ -442,6 +505,8 @@ def test_load_demo_writes_opens_and_registers(qapp, demo_dir, monkeypatch):
         assert w.result is not None and w.result.target == "thermal"
         assert w.current_view() == "masks" and w.masks_view.view.displayed().shape == (480, 640, 3)
         folder = calls[0]
+        # the demo folder is deleted on close: the export is not proposed inside it
+        assert w.default_export_folder() == Path.home() / "plantreg-demo-registered-thermal"
     finally:
         w.shutdown()
         w.deleteLater()
@@ -466,6 +531,40 @@ def test_dropping_a_demo_folder_opens_rig_and_recording(qapp, demo_dir):
         assert w.rig_path == demo_dir / "rig.json" and w.recording_path == demo_dir / "recording"
         assert set(w.raw_grid.views) == {"depth", "ir", "rgb", "thermal", "hyperspectral"}
         assert w.register_button.isEnabled() and w.target_combo.currentText() == "ir"
+    finally:
+        w.shutdown()
+        w.deleteLater()
+
+
+def test_empty_views_say_why_until_registered(qapp, demo_dir):
+    """A view with nothing to show names what is missing (a blank grey pane looks like a fault);
+    each note goes away once its content is there."""
+    from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
+
+    w = RegistrationWorkspace()
+    w.resize(1200, 800)
+    w.show()
+    notes = w.empty_notes
+    try:
+        assert set(notes) == {"raw", "side-by-side", "mosaic", "masks", "3d"}
+        assert all(not n.isHidden() for n in notes.values())
+        assert "Open a rig and a recording" in notes["raw"].text()
+        assert w.spectrum.isHidden()  # no empty spectrum plot before a cube is open
+        w.open_rig(demo_dir / "rig.json")
+        assert "open the recording" in notes["raw"].text() and w.spectrum.isHidden()
+        w.open_recording(demo_dir / "recording")
+        _wait(qapp, lambda: not w.is_busy())
+        assert notes["raw"].isHidden()  # the raw images are there
+        assert not w.spectrum.isHidden()  # the recording has a hyperspectral cube
+        for key in ("side-by-side", "mosaic", "masks", "3d"):
+            assert not notes[key].isHidden()
+            assert "press Register" in notes[key].text()
+        w.set_view("mosaic")
+        assert notes["mosaic"].isVisible() and notes["mosaic"].geometry() == w.mosaic_view.rect()
+        w.run_registration("ir")
+        assert "Registering into ir" in notes["masks"].text()
+        _wait(qapp, lambda: w.result is not None and not w.is_busy())
+        assert all(n.isHidden() for n in notes.values())
     finally:
         w.shutdown()
         w.deleteLater()

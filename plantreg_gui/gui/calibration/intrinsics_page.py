@@ -68,7 +68,8 @@ class IntrinsicsPage(QWidget):
         busy = self.wizard.is_busy()
         weak = results.weak_views(self.model.calibration) if self.model.calibration_ready() else set()
         weak -= self.model.excluded
-        self.exclude_btn.setText(f"Exclude {len(weak)} weak view{'s' if len(weak) != 1 else ''} and recalibrate")
+        self.exclude_btn.setText(f"Exclude {len(weak)} weak view{'s' if len(weak) != 1 else ''} and recalibrate"
+                                 if weak else "No weak views to exclude")
         self.exclude_btn.setEnabled(not busy and bool(weak))
         self.recal_btn.setEnabled(not busy and self.model.session is not None)
 

@@ -4,7 +4,6 @@ wizard connects to a Qt signal (queued into the GUI thread)."""
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 from typing import Any, Callable
 
@@ -65,21 +64,22 @@ def tables_job(session, calibration, detections: dict, excluded: set[Key], progr
 
 
 def demo_job(folder: Path, progress: Reporter | None = None) -> Path:
-    """Write the demo (``plantreg demo``) into ``folder`` (replaced), return its calibration session."""
-    from ...core.synthetic import write_demo
+    """Write the calibration session of the demo (as ``plantreg demo`` writes it into
+    ``calibration/``) into ``folder/calibration`` (replaced) and return that session folder.
 
-    progress = ensure_reporter(progress)
+    Only the session is rendered: the demo's recording and ground truth (what ``write_demo``
+    also writes) belong to the registration workspace and would double the wizard's start-up.
+    """
+    from ...core.calibration.synthetic import write_calibration_session
+    from ...core.synthetic.demo import demo_rig
+
     folder = Path(folder)
-    tmp = folder.with_name(folder.name + ".new")
-    shutil.rmtree(tmp, ignore_errors=True)
-    write_demo(tmp, progress=progress)
-    old = folder.with_name(folder.name + ".old")
-    shutil.rmtree(old, ignore_errors=True)
-    if folder.exists():
-        folder.rename(old)
-    tmp.rename(folder)
-    shutil.rmtree(old, ignore_errors=True)
-    return folder / "calibration"
+    folder.mkdir(parents=True, exist_ok=True)
+    session = folder / "calibration"
+    # built beside it under a temporary name and moved into place by the engine
+    write_calibration_session(demo_rig("demo"), session, seed=0, progress=ensure_reporter(progress),
+                              overwrite=True)
+    return session
 
 
 def save_job(calibration, session, report, excluded: set[Key], rig_path: Path, report_path: Path | None,

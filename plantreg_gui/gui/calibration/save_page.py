@@ -8,8 +8,8 @@ import cv2
 import numpy as np
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QFileDialog, QFormLayout, QGridLayout,
-                               QGroupBox, QHBoxLayout, QLabel, QLineEdit, QPushButton, QSizePolicy,
-                               QVBoxLayout, QWidget)
+                               QGroupBox, QHBoxLayout, QLabel, QLineEdit, QMessageBox, QPushButton,
+                               QSizePolicy, QVBoxLayout, QWidget)
 
 from .widgets import banner, qpixmap, set_banner
 
@@ -26,6 +26,7 @@ class SavePage(QWidget):
         self._rays = None  # (cal id, rays (H*W, 3) z=1 in the depth camera frame)
         self._depth_cache: dict[str, np.ndarray] = {}
         self.inside_fraction = float("nan")
+        self._confirmed: set[str] = set()  # files the user agreed to replace
         self._roi_set = False
         lay = QHBoxLayout(self)
 
@@ -340,6 +341,13 @@ class SavePage(QWidget):
         f, _ = QFileDialog.getSaveFileName(self, "Save " + kind, edit.text(), "JSON (*.json)")
         if f:
             edit.setText(f)
+            self._confirmed.add(str(Path(f)))  # the file dialog asked about replacing it
+
+    def _replaced_files(self, paths: list[Path]) -> list[Path]:
+        """Existing files among ``paths`` that saving would replace and the user has not agreed
+        to replace (chosen in the file dialog, or written by this wizard before)."""
+        mine = {str(Path(v)) for k, v in self.model.saved_paths.items() if k in ("rig", "report")}
+        return [p for p in paths if p.exists() and str(p) not in mine and str(p) not in self._confirmed]
 
     def save(self) -> None:
         lo, hi = self.roi()
@@ -351,7 +359,20 @@ class SavePage(QWidget):
             return
         set_banner(self.message, "")
         rep = self.report_path.text().strip()
-        self.wizard.save_outputs(Path(self.rig_path.text().strip()), Path(rep) if rep else None, lo, hi)
+        rig_path, rep_path = Path(self.rig_path.text().strip()), (Path(rep) if rep else None)
+        # a rig file is a calibration someone may still use: never replace one silently
+        existing = self._replaced_files([p for p in (rig_path, rep_path) if p is not None])
+        if existing:
+            ans = QMessageBox.question(
+                self, "Replace files?",
+                "These files exist and would be replaced:\n" + "\n".join(str(p) for p in existing)
+                + "\n\nReplace them?",
+                QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
+            if ans != QMessageBox.StandardButton.Yes:
+                set_banner(self.message, "Not saved: choose other file names, or save again and confirm.")
+                return
+            self._confirmed.update(str(p) for p in existing)
+        self.wizard.save_outputs(rig_path, rep_path, lo, hi)
 
     def saved(self, paths: dict[str, str]) -> None:
         set_banner(self.message, "Saved " + ", ".join(paths.values()))

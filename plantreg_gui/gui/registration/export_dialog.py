@@ -60,6 +60,24 @@ class ExportDialog(QDialog):
         lay.addWidget(box)
         lay.addWidget(note)
         lay.addWidget(self.buttons)
+        # Export only with a folder and at least one part: an empty field would mean the current
+        # directory (and "replace it?"), nothing ticked would write an empty folder
+        self.folder.textChanged.connect(self._validate)
+        for cb in self.boxes.values():
+            cb.toggled.connect(self._validate)
+        self._validate()
+
+    def _validate(self) -> None:
+        ok_btn = self.buttons.button(QDialogButtonBox.StandardButton.Ok)
+        if not self.folder.text().strip():
+            ok_btn.setEnabled(False)
+            ok_btn.setToolTip("choose the folder to export to")
+        elif not self.what():
+            ok_btn.setEnabled(False)
+            ok_btn.setToolTip("tick at least one part to write")
+        else:
+            ok_btn.setEnabled(True)
+            ok_btn.setToolTip("")
 
     def _browse(self) -> None:
         d = QFileDialog.getExistingDirectory(self, "Export folder", self.folder.text() or str(Path.home()))
@@ -67,7 +85,7 @@ class ExportDialog(QDialog):
             self.folder.setText(d)
 
     def out(self) -> Path:
-        return Path(self.folder.text()).expanduser()
+        return Path(self.folder.text().strip()).expanduser()
 
     def what(self) -> list[str]:
         return [k for k, cb in self.boxes.items() if cb.isChecked()]

@@ -57,16 +57,18 @@ class MosaicView(QWidget):
         top.addWidget(QLabel("Mode"))
         top.addWidget(self.mode)
         top.addSpacing(8)
-        top.addWidget(QLabel("A"))
+        self._a_label, self._b_label = QLabel("A"), QLabel("B")
+        self._tile_label, self._alpha_label = QLabel("Tile"), QLabel("Blend")
+        top.addWidget(self._a_label)
         top.addWidget(self.a)
-        top.addWidget(QLabel("B"))
+        top.addWidget(self._b_label)
         top.addWidget(self.b)
         top.addSpacing(8)
-        top.addWidget(QLabel("Tile"))
+        top.addWidget(self._tile_label)
         top.addWidget(self.tile)
         top.addWidget(self.tile_slider)
         top.addSpacing(8)
-        top.addWidget(QLabel("Blend"))
+        top.addWidget(self._alpha_label)
         top.addWidget(self.alpha)
         top.addWidget(self.flicker)
         top.addStretch(1)
@@ -82,6 +84,7 @@ class MosaicView(QWidget):
         self.tile.valueChanged.connect(self.update_view)
         self.alpha.valueChanged.connect(self.update_view)
         self.flicker.toggled.connect(self._toggle_flicker)
+        self._sync_controls()
 
     # ------------------------------------------------------------------ data
     def set_renders(self, renders: dict[str, np.ndarray], order: list[str],
@@ -127,7 +130,22 @@ class MosaicView(QWidget):
             return display.checkerboard(a, b, self.tile.value())
         return display.blend(a, b, self.alpha.value() / 100.0)
 
+    def _sync_controls(self) -> None:
+        """Enable only the controls the current mode uses (a live control that changes nothing
+        reads as a fault): A/B for checkerboard, blend and flicker; the tile size for mosaic and
+        checkerboard; the blend slider for blend."""
+        mode, flick = self.current_mode(), self.flicker.isChecked()
+        two = flick or mode in ("checkerboard", "blend")
+        for w in (self.a, self.b, self._a_label, self._b_label):
+            w.setEnabled(two)
+        tiles = not flick and mode in ("mosaic", "checkerboard")
+        for w in (self.tile, self.tile_slider, self._tile_label):
+            w.setEnabled(tiles)
+        for w in (self.alpha, self._alpha_label):
+            w.setEnabled(not flick and mode == "blend")
+
     def update_view(self) -> None:
+        self._sync_controls()
         img = self.composite()
         if img is None:
             self.view.clear()

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-from PySide6.QtCore import QRectF, QSettings, Qt, Signal
+from PySide6.QtCore import QEvent, QRectF, QSettings, Qt, Signal
 from PySide6.QtWidgets import (
     QComboBox, QFileDialog, QInputDialog, QLabel, QMenu, QMessageBox, QProgressBar, QPushButton, QSplitter,
     QStatusBar, QTabWidget, QToolBar, QToolButton, QVBoxLayout, QWidget,
@@ -142,6 +142,35 @@ def _plant3d_job(folder: Path, plant: str, settings, progress) -> dict:
     return {"plant": p, "layers": layers, "renders": renders, "cloud": cloud}
 
 
+# ---------------------------------------------------------------------- empty views
+class _EmptyNote(QLabel):
+    """A centred note laid over a view while it has nothing to show, saying why and what to do
+    (an empty grey pane would look like a fault)."""
+
+    def __init__(self, host: QWidget):
+        super().__init__(host)
+        self.setObjectName("emptyNote")
+        self.setWordWrap(True)
+        self.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.setStyleSheet("QLabel#emptyNote { color: #555; font-size: 12pt; padding: 40px;"
+                           " background: #f4f4f4; }")
+        self.setTextInteractionFlags(Qt.TextInteractionFlag.NoTextInteraction)
+        host.installEventFilter(self)
+        self.setGeometry(host.rect())
+        self.hide()
+
+    def eventFilter(self, obj, event) -> bool:  # noqa: N802 (Qt name)
+        if obj is self.parent() and event.type() == QEvent.Type.Resize:
+            self.setGeometry(obj.rect())
+        return False
+
+    def show_text(self, text: str) -> None:
+        self.setText(text)
+        self.setVisible(bool(text))
+        if text:
+            self.raise_()
+
+
 # ---------------------------------------------------------------------- the widget
 class RegistrationWorkspace(QWidget):
     """See the module docstring. Signals: ``registered(result)`` after each registration,
@@ -232,6 +261,7 @@ class RegistrationWorkspace(QWidget):
         for key, w in self.views.items():
             self.tabs.addTab(w, VIEWS[key])
         self.tabs.tabBarClicked.connect(lambda _i: setattr(self, "_view_chosen", True))
+        self.empty_notes = {key: _EmptyNote(w) for key, w in self.views.items()}
         self.tabs.currentChanged.connect(self._tab_changed)
         self.raw_grid.hovered.connect(self._hover_raw)
         self.sbs_grid.hovered.connect(self._hover_target)
@@ -253,6 +283,8 @@ class RegistrationWorkspace(QWidget):
         sl.addWidget(self.spectrum_label)
         sl.addWidget(self.spectrum)
         sl.addWidget(self.summary, 1)
+        self.spectrum.hide()  # shown once a multi-band image is open (an empty plot says nothing)
+        self.spectrum_label.hide()
         side.setMinimumWidth(290)
         side.setMaximumWidth(360)
 
@@ -286,6 +318,38 @@ class RegistrationWorkspace(QWidget):
         lay.addWidget(self.banner)
         lay.addWidget(split, 1)
         lay.addWidget(self.status)
+        self._update_empty_notes()
+
+    def _update_empty_notes(self) -> None:
+        """Say in every empty view why it is empty and what fills it."""
+        busy = {getattr(w, "_kind", "") for w in self._workers}
+        registering = "register" in busy or (self._pending_target is not None and bool(busy))
+        loading = [w for w in self._workers if getattr(w, "_kind", "") == "load"]
+        if loading and not self.raw:
+            raw = f"{getattr(loading[0], '_title', 'Reading the recording')}… the images appear here when read."
+        elif self.raw:
+            raw = ""
+        elif self.rig is not None:
+            raw = ("Rig open. Now open the recording that goes with it (Open recording…, or drop its "
+                   "folder here): its raw images are shown in Raw images at once.")
+        else:
+            raw = "Open a rig and a recording (File menu, or drop a folder here), or File ▸ Load demo."
+        if self.result is not None:
+            reg = ""
+        elif registering:
+            target = self._pending_target or self.target_combo.currentText()
+            reg = f"Registering into {target}… this view fills in when it is done."
+        elif self.plant is not None:
+            reg = ("Nothing registered: no calibration ships with this data set, and registration needs a rig "
+                   "file with the cameras' intrinsics and extrinsics.\nThe raw images are in Raw images, "
+                   "the depth camera's point cloud in 3D.")
+        elif self.rig is not None and self.recording is not None:
+            reg = "Not registered yet: choose the target camera in the toolbar and press Register."
+        else:
+            reg = raw or "Open a rig and a recording, then press Register."
+        cloud = "" if self.cloud is not None else reg
+        for key, note in self.empty_notes.items():
+            note.show_text(raw if key == "raw" else cloud if key == "3d" else reg)
 
     # ------------------------------------------------------------------ contract for main_window
     def is_busy(self) -> bool:
@@ -348,6 +412,7 @@ class RegistrationWorkspace(QWidget):
                                 for L in self.raw}
             self._show_raw()
         self._update_labels()
+        self._update_empty_notes()
 
     def open_recording(self, path: str | Path) -> None:
         """Read a recording folder on a worker and show its raw images. Without an open rig, a
@@ -394,6 +459,7 @@ class RegistrationWorkspace(QWidget):
             self.banner.setText("No rig is open: the raw images are shown; open the rig file (File ▸ Open rig…) "
                                 "to register them.")
             self.banner.show()
+        self._update_empty_notes()
 
     def _plant_loaded(self, out: dict) -> None:
         p = out["plant"]
@@ -414,6 +480,7 @@ class RegistrationWorkspace(QWidget):
         self._pending_target = None
         if not self._view_chosen:
             self.tabs.setCurrentWidget(self.raw_grid)
+        self._update_empty_notes()
 
     def _forget_registration(self) -> None:
         self._generation += 1  # results of registrations still running belong to the old data
@@ -428,6 +495,7 @@ class RegistrationWorkspace(QWidget):
         self.export_button.setEnabled(False)
         self.summary.setText("")
         self.controls.set_layers(self.raw)
+        self._update_empty_notes()
 
     def _fill_targets(self) -> None:
         keep = self.target_combo.currentText()
@@ -465,6 +533,7 @@ class RegistrationWorkspace(QWidget):
         target = target or self.target_combo.currentText() or (self.rig.depth_camera if self.rig else None)
         if any(getattr(w, "_kind", "") == "load" for w in self._workers):
             self._pending_target = target  # runs when the recording has been read
+            self._update_empty_notes()
             return
         self._pending_target = None
         if self.rig is None or self.recording is None:
@@ -511,6 +580,7 @@ class RegistrationWorkspace(QWidget):
         if centre is not None:  # start with the cursor on the object so every read-out has a value
             self._hover_target("start", *centre)
             self.cloud_view.pick(r.points_rig[centre])
+        self._update_empty_notes()
         self.registered.emit(r)
 
     def cancel(self) -> None:
@@ -522,11 +592,20 @@ class RegistrationWorkspace(QWidget):
     def _ask_export(self) -> None:
         if self.result is None:
             return
-        start = self.last_export or (self.recording_path.parent / f"registered-{self.result.target}"
-                                     if self.recording_path else Path.home())
+        start = self.last_export or self.default_export_folder()
         dlg = ExportDialog(start, self)
         if dlg.exec():
             self.export(dlg.out(), dlg.what())
+
+    def default_export_folder(self) -> Path:
+        """Beside the recording; for the demo, in the home folder: the demo lives in a temporary
+        folder that is deleted when the window closes, and an export in it would go with it."""
+        target = self.result.target if self.result is not None else "target"
+        rec = self.recording_path
+        demo = Path(self._demo_tmp.name).resolve() if self._demo_tmp is not None else None
+        if rec is None or (demo is not None and demo in rec.resolve().parents):
+            return Path.home() / f"plantreg-demo-registered-{target}" if rec is not None else Path.home()
+        return rec.parent / f"registered-{target}"
 
     def export(self, out: str | Path, what: list[str] | None = None, overwrite: bool = False) -> bool:
         """Write the result with :func:`write_outputs` on a worker; asks before replacing a
@@ -570,6 +649,7 @@ class RegistrationWorkspace(QWidget):
     # ------------------------------------------------------------------ workers
     def _start(self, w: Worker, title: str, on_done: Callable[[Any], None], kind: str = "load") -> None:
         w._kind = kind  # type: ignore[attr-defined]
+        w._title = title  # type: ignore[attr-defined]
         self._workers.append(w)
         w.progress.connect(lambda f, m, t=title: self._progress(t, f, m))
         w.finished.connect(lambda out: self._guard(on_done, out, title="Cannot show the result"))
@@ -582,6 +662,7 @@ class RegistrationWorkspace(QWidget):
         self.cancel_button.show()
         self.register_button.setEnabled(False)
         w.start()
+        self._update_empty_notes()
 
     def _progress(self, title: str, fraction: float, message: str) -> None:
         self.progress.setValue(int(round(fraction * 1000)))
@@ -602,6 +683,7 @@ class RegistrationWorkspace(QWidget):
                     self.run_registration(t)
             if not self._workers:
                 self.idle.emit()
+        self._update_empty_notes()
 
     def _guard(self, fn: Callable, *args: Any, title: str = "Cannot open") -> Any:
         try:
