@@ -6,15 +6,20 @@ import time
 from pathlib import Path
 
 from PySide6.QtCore import QTimer
+from PySide6.QtGui import QIcon
 from PySide6.QtWidgets import QApplication, QMainWindow, QTabWidget
 
 from .. import __version__
+
+ICON = Path(__file__).resolve().parents[2] / "resources" / "plantreg.svg"
 
 
 class MainWindow(QMainWindow):
     def __init__(self) -> None:
         super().__init__()
         self.setWindowTitle(f"plantreg {__version__}")
+        if ICON.is_file():  # source and editable installs; a wheel has no top-level resources/
+            self.setWindowIcon(QIcon(str(ICON)))
         self.tabs = QTabWidget(self)
         self.tabs.setDocumentMode(True)
         self.setCentralWidget(self.tabs)
