@@ -11,7 +11,8 @@ import pytest
 os.environ.setdefault("QT_API", "pyside6")
 os.environ.setdefault("PYVISTA_OFF_SCREEN", "false")
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+# `shared/` lies beside the project root (as in CI); PLANTREG_SHARED_DATA overrides it
+SHARED = Path(os.environ.get("PLANTREG_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 
 
 @pytest.fixture(scope="session")
@@ -29,5 +30,5 @@ def demo_dir(tmp_path_factory) -> Path:
 def shared_data() -> Path:
     """`../shared/data` beside the project (real data sets)."""
     if not SHARED.is_dir():
-        pytest.fail(f"shared data folder not found at {SHARED}")
+        pytest.fail(f"shared data folder not found at {SHARED} (put shared/ beside the project or set PLANTREG_SHARED_DATA)")
     return SHARED
