@@ -209,7 +209,7 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
 
 
 # ---------------------------------------------------------------------- the real OpenCV stereo set
-def test_opencv_stereo_reaches_saved_rig_pair_02_worst(qtbot, shared_data, tmp_path, monkeypatch):
+def test_opencv_stereo_to_saved_rig_tallest_bar_is_engine_worst_view(qtbot, shared_data, tmp_path, monkeypatch):
     from plantreg_gui.core.rig import Rig
 
     folder = tmp_path / "stereo"
@@ -250,6 +250,48 @@ def test_opencv_stereo_reaches_saved_rig_pair_02_worst(qtbot, shared_data, tmp_p
         rig = Rig.load(out)
         assert abs(rig.camera("left").K[0, 0] - 535.9) < 535.9 * 0.02
         assert rig.depth_camera is None
+    finally:
+        _close(w)
+
+
+def test_opencv_stereo_classic_detector_makes_pair_02_worst(qtbot, shared_data, tmp_path):
+    """Choosing OpenCV's classic detector (findChessboardCorners + 11 x 11 cornerSubPix) in the
+    wizard reproduces OpenCV's published figure: pair 02 is the worst view of both cameras and the
+    engine flags it; the choice is kept in the session."""
+    from plantreg_gui.core.calibration import Session
+
+    folder = tmp_path / "stereo"
+    shutil.copytree(shared_data / "opencv-stereo", folder)
+    w = _wizard(qtbot)
+    try:
+        assert w.open_session(folder)
+        w.go_to_page(3)
+        _idle(qtbot, w)
+        combo = w.pages[2].detector
+        assert combo.isEnabled() and combo.currentData() == "auto"
+        combo.setCurrentIndex(combo.findData("classic"))
+        assert w.is_busy() and not w.model.detections  # every image is detected again
+        _idle(qtbot, w)
+        assert len(w.model.detections) == 26 and all(d.status == "found" for d in w.model.detections.values())
+        w.go_to_page(4)
+        _idle(qtbot, w)
+        assert not _error_dialogs(w), [b.text() for b in _error_dialogs(w)]
+        chart = w.pages[3].chart
+        for cam in ("left", "right"):
+            ci = w.model.calibration.intrinsics[cam]
+            assert chart.tallest(cam) == "pose_02"
+            assert "pose_02" in {p for p, _e, _r in ci.weak_views}
+    finally:
+        _close(w)
+    # kept per image in session.json (what `plantreg calibrate` reads) and restored on reopening
+    opts = Session.load(folder).detect_options()
+    assert len(opts) == 26 and {o.detector for o in opts.values()} == {"classic"}
+    w = _wizard(qtbot)
+    try:
+        assert w.open_session(folder)
+        assert w.pages[2].detector.currentData() == "classic"
+        assert {o.detector for o in w.model.options().values()} == {"classic"}
+        _idle(qtbot, w)
     finally:
         _close(w)
 

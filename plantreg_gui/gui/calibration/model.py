@@ -75,7 +75,43 @@ class WizardModel(QObject):
         self.review_changed.emit()
 
     def options(self) -> dict[Key, Any]:
-        return self.session.detect_options() if self.session is not None else {}
+        """Detection options per image: the stored ones, with the session-wide detector."""
+        from ...core.calibration.detect import DetectOptions
+
+        if self.session is None:
+            return {}
+        opts = self.session.detect_options()
+        if "detector" in self.session.review:  # also for poses added after it was chosen
+            det = self.detector()
+            for key in self.keys():
+                o = opts.get(key, DetectOptions())
+                opts[key] = DetectOptions(o.invert, o.enhance, det)
+        return opts
+
+    def detector(self) -> str:
+        """The session-wide chessboard corner detector (``"auto"`` or ``"classic"``, see
+        :class:`~plantreg_gui.core.calibration.detect.DetectOptions`), kept in ``review``."""
+        from ...core.calibration.detect import DETECTORS
+
+        det = self.session.review.get("detector", "auto") if self.session is not None else "auto"
+        return det if det in DETECTORS else "auto"
+
+    def set_detector(self, detector: str) -> bool:
+        """Use ``detector`` for every image: kept in ``review`` and in each image's options (so
+        that ``plantreg calibrate`` on the session does the same). False if nothing changed."""
+        from ...core.calibration.detect import DetectOptions
+
+        s = self.session
+        if s is None or (detector == self.detector() and "detector" in s.review):
+            return False
+        stored = s.detect_options()
+        for key in self.keys():
+            o = stored.get(key, DetectOptions())
+            new = DetectOptions(o.invert, o.enhance, detector)
+            s.set_detect_options(key[0], key[1], None if new == DetectOptions() else new)
+        s.review["detector"] = detector
+        self._save_review()
+        return True
 
     def set_options(self, key: Key, options) -> None:
         self.session.set_detect_options(key[0], key[1], options)

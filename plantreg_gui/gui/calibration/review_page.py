@@ -114,6 +114,17 @@ class ReviewPage(QWidget):
         right = QWidget()
         rl = QVBoxLayout(right)
         rl.setContentsMargins(0, 0, 0, 0)
+        ag = QGroupBox("All images")
+        af = QFormLayout(ag)
+        self.detector = QComboBox()
+        self.detector.addItem("automatic (recommended)", "auto")
+        self.detector.addItem("OpenCV classic (11×11 sub-pixel)", "classic")
+        self.detector.setToolTip("Automatic (findChessboardCornersSB, sub-pixel window sized to the squares) is "
+                                 "more accurate; classic reproduces OpenCV's published figures but its 11×11 "
+                                 "window misplaces corners where squares are smaller than ~24 px.")
+        self.detector.currentIndexChanged.connect(self._detector_chosen)
+        af.addRow("Corner detector:", self.detector)
+        rl.addWidget(ag)
         g = QGroupBox("This image")
         gl = QVBoxLayout(g)
         self.use = QCheckBox("Use this view in the calibration")
@@ -167,7 +178,11 @@ class ReviewPage(QWidget):
         self.model.detection_changed.connect(self._detection)
         self.model.review_changed.connect(self._review)
         self.model.calibration_changed.connect(self._relabel)
-        wizard.busy_changed.connect(lambda b: self.redetect_btn.setEnabled(not b and self.current is not None))
+        wizard.busy_changed.connect(self._busy)
+
+    def _busy(self, busy: bool) -> None:
+        self.redetect_btn.setEnabled(not busy and self.current is not None)
+        self.detector.setEnabled(not busy and self.model.session is not None)
 
     # ------------------------------------------------------------------ lists
     def _session(self) -> None:
@@ -184,6 +199,9 @@ class ReviewPage(QWidget):
             self.cov_cam.addItems(s.camera_names)
         self.cam_filter.blockSignals(False)
         self.cov_cam.blockSignals(False)
+        self.detector.blockSignals(True)
+        self.detector.setCurrentIndex(max(0, self.detector.findData(self.model.detector())))
+        self.detector.blockSignals(False)
         self._fill_list()
         self.view.clear("no image selected")
         if self.list.count():
@@ -353,7 +371,14 @@ class ReviewPage(QWidget):
 
         from ...core.calibration import DetectOptions
         inv = {0: None, 1: False, 2: True}[self.polarity.currentIndex()]
-        return DetectOptions(invert=inv, enhance=self.enhance.isChecked())
+        return DetectOptions(invert=inv, enhance=self.enhance.isChecked(), detector=self.model.detector())
+
+    def _detector_chosen(self, _index: int) -> None:
+        self.wizard.set_detector(self.detector.currentData())
+        # refused while busy or without a session: show what is in use
+        self.detector.blockSignals(True)
+        self.detector.setCurrentIndex(max(0, self.detector.findData(self.model.detector())))
+        self.detector.blockSignals(False)
 
     def _redetect(self) -> None:
         if self.current is not None:

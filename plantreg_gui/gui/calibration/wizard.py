@@ -217,6 +217,15 @@ class CalibrationWizard(QWidget):
         self.model.set_options(key, options)
         self._start_detection({key}, {key: options})
 
+    def set_detector(self, detector: str) -> None:
+        """Detect every image again with ``detector`` (``"auto"`` or ``"classic"``), kept in the
+        session's review; the current page refills when the work is done."""
+        if self.model.session is None or self.is_busy():
+            return
+        if self.model.set_detector(detector):
+            self.run_detection()
+            self._ensure(NEEDS[self.page])
+
     def recalibrate(self) -> None:
         if self.model.session is None:
             return
