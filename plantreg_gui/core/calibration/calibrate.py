@@ -30,7 +30,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..camera import Camera
 from ..errors import InputError
@@ -269,6 +268,8 @@ def _bundle_adjust(cams: list[str], ref: str, init_cam: dict[str, tuple], init_b
         return evaluate(xf, True)[1]
 
     progress(0.1, "joint refinement of all cameras and board poses")
+    from scipy.optimize import least_squares  # here: importing it costs ~1 s at GUI start-up
+
     # soft-L1 loss (quadratic below 1 px): one misdetected view must not drag the whole rig
     sol = least_squares(residuals, x0[idx_free], jac=jacobian, method="trf", loss="soft_l1", f_scale=1.0,
                         x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
