@@ -247,3 +247,21 @@ def test_no_skirt_at_noise_holes(cam, rays):
     assert not inner.any()  # nothing around the hole
     assert len(uv) == 2 * (29 + 40)  # the whole outer rim
     assert np.array_equal(np.unique(ext.triangles), np.arange(ext.n_vertices))
+
+
+def test_transport_pixels_uses_the_requested_boundary_skirt(cam, rays):
+    """The same depth map meshed with and without the skirt: a pixel half-way into the boundary
+    pixel's outer half is carried only with the skirt (the mesh cache must not mix them up)."""
+    from plantreg_gui.core.register import RegistrationParams, transport_pixels
+    from plantreg_gui.core.rig import Rig
+
+    H, W = cam.shape
+    depth = np.full((H, W), np.nan, dtype=np.float32)
+    r0, r1, c0, c1 = 200, 230, 300, 341
+    depth[r0:r1, c0:c1] = plane_depth(rays, H, W, tilted_normal(30), [0, 0, 1.0])[r0:r1, c0:c1]
+    rig = Rig([cam], depth_camera="ir", roi_min=ROI_MIN, roi_max=ROI_MAX)
+    probe = np.array([[c0 - 0.4, 215.2], [320.3, 215.2]])
+    with_skirt = transport_pixels(rig, depth, "ir", probe, "ir", RegistrationParams(boundary_px=0.5))
+    without = transport_pixels(rig, depth, "ir", probe, "ir", RegistrationParams(boundary_px=0.0))
+    assert np.allclose(with_skirt, probe, atol=1e-3)          # both carried, back onto themselves
+    assert np.isnan(without[0]).all() and np.allclose(without[1], probe[1], atol=1e-3)

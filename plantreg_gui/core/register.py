@@ -493,7 +493,7 @@ def _mesh_key(rig: Rig, depth_m: np.ndarray, params: RegistrationParams) -> tupl
     lo, hi = params.roi(rig)
     h = hashlib.blake2b(np.ascontiguousarray(depth_m, dtype=np.float32).tobytes(), digest_size=16).hexdigest()
     geom = np.concatenate([dcam.K.ravel(), dcam.dist, dcam.R_cam_rig.ravel(), dcam.t_cam_rig, lo, hi,
-                           [params.edge_angle_deg, dcam.width, dcam.height]])
+                           [params.edge_angle_deg, params.boundary_px, dcam.width, dcam.height]])
     return (h, geom.tobytes())
 
 
