@@ -307,3 +307,18 @@ def test_ply_property_names_are_sanitised_and_unique():
     names = export.ply_property_names(res)
     assert names == {"thermal-2": ["thermal_2"], "x": ["x_value"], "3d": ["c3d"],
                      "rgb": ["rgb_b000", "rgb_b001", "rgb_b002"]}
+
+
+def test_cameras_with_clashing_file_names_are_refused(tmp_path):
+    """'thermal 1' and 'thermal_1' would both be written as registered/thermal_1.tif."""
+    from plantreg_gui.core.errors import InputError
+
+    rig, res = _result()
+    rig.camera("hs").name = "thermal 1"
+    rig.camera("thermal").name = "thermal_1"
+    res.registered = {"ir": res.registered["ir"], "thermal_1": res.registered["thermal"],
+                      "thermal 1": res.registered["hs"]}
+    res.cases = {"thermal_1": res.cases["thermal"], "thermal 1": res.cases["hs"]}
+    with pytest.raises(InputError, match="'thermal_1' and 'thermal 1'|'thermal 1' and 'thermal_1'"):
+        export.write_outputs(res, rig, None, tmp_path / "out")
+    assert not (tmp_path / "out").exists()

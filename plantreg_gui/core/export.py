@@ -79,6 +79,7 @@ def write_outputs(
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     cams = _camera_order(result, rig)
+    _check_file_names(list(dict.fromkeys([*cams, *result.cases])))
     H, W = result.shape
     opts = {k: dict(v) for k, v in (display_options or {}).items()}
     written: list[str] = []
@@ -344,6 +345,16 @@ def _safe(name: str) -> str:
     """A camera name usable as a file name and PLY property (letters, digits, _ - .)."""
     s = re.sub(r"[^A-Za-z0-9_.-]", "_", str(name))
     return s or "camera"
+
+
+def _check_file_names(cams: list[str]) -> None:
+    """Two cameras whose names make the same file name would overwrite each other's outputs."""
+    seen: dict[str, str] = {}
+    for cam in cams:
+        other = seen.setdefault(_safe(cam).lower(), cam)  # .lower(): case-insensitive file systems
+        if other != cam:
+            raise InputError(f"cameras '{other}' and '{cam}' would be written to the same files "
+                             f"('{_safe(cam)}.*'); rename one of them in the rig")
 
 
 def _ply_name(name: str) -> str:
