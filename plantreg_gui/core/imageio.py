@@ -74,6 +74,20 @@ def read_image(path: str | Path) -> np.ndarray:
     return img
 
 
+def read_json(path: str | Path) -> object:
+    """Parse a JSON file; unreadable or malformed files raise :class:`InputError` naming the
+    file and, for syntax errors, the line and column."""
+    import json
+
+    path = Path(path)
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as e:
+        raise InputError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})", path) from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"cannot read ({e})", path) from None
+
+
 # ---------------------------------------------------------------------- atomic writing
 def _umask() -> int:
     """The process umask, read without changing it (os.umask would race with other threads)."""

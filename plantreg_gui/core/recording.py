@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .imageio import atomic_write_text, read_image
+from .imageio import atomic_write_text, read_image, read_json
 from .rig import Rig
 
 MANIFEST = "recording.json"
@@ -50,12 +50,7 @@ class Recording:
             raise InputError("recording folder not found", folder)
         if not manifest.is_file():
             raise InputError(f"not a recording folder (no {MANIFEST})", folder)
-        try:
-            m = json.loads(manifest.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as e:
-            raise InputError(f"not valid JSON (line {e.lineno}: {e.msg})", manifest) from None
-        except (OSError, UnicodeDecodeError) as e:
-            raise InputError(f"cannot read ({e})", manifest) from None
+        m = read_json(manifest)
         if not isinstance(m, dict) or not isinstance(m.get("images", {}), dict):
             raise InputError("expected {\"depth\": FILE, \"images\": {CAMERA: FILE}}", manifest)
         paths: dict[str, Path] = {}

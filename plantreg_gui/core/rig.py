@@ -25,7 +25,7 @@ import numpy as np
 
 from .camera import Camera
 from .errors import InputError
-from .imageio import atomic_write_text
+from .imageio import atomic_write_text, read_json
 
 FORMAT = "plantreg.rig"
 VERSION = 1
@@ -142,13 +142,7 @@ class Rig:
         path = Path(path)
         if not path.is_file():
             raise InputError("rig file not found", path)
-        try:
-            d = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError) as e:
-            raise InputError(f"cannot read rig file ({e})", path) from None
-        except json.JSONDecodeError as e:
-            raise InputError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})", path) from None
-        return cls.from_dict(d, path)
+        return cls.from_dict(read_json(path), path)
 
     def save(self, path: str | Path) -> None:
         """Write atomically (temp file + rename)."""

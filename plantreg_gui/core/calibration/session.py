@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
-from ..imageio import IMAGE_SUFFIXES, atomic_write_text
+from ..imageio import IMAGE_SUFFIXES, atomic_write_text, read_json
 from .board import Board
 
 SESSION_FILE = "session.json"
@@ -152,12 +152,7 @@ class Session:
             raise InputError("session folder not found", folder)
         if not path.is_file():
             raise InputError(f"not a calibration session (no {SESSION_FILE})", folder)
-        try:
-            d = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError) as e:
-            raise InputError(f"cannot read ({e})", path) from None
-        except json.JSONDecodeError as e:
-            raise InputError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})", path) from None
+        d = read_json(path)
         if not isinstance(d, dict):
             raise InputError("the top level must be a JSON object", path)
         try:
