@@ -33,33 +33,6 @@ def _wait(qapp, pred, timeout: float = 120.0) -> None:
         loop.exec()
 
 
-class LatencyProbe:
-    """A 20 ms QTimer on the GUI thread recording the largest gap between its ticks."""
-
-    def __init__(self) -> None:
-        from PySide6.QtCore import QTimer
-
-        self.max_gap = 0.0
-        self.ticks = 0
-        self._last = time.perf_counter()
-        self.timer = QTimer()
-        self.timer.setInterval(20)
-        self.timer.timeout.connect(self._tick)
-
-    def _tick(self) -> None:
-        now = time.perf_counter()
-        self.max_gap = max(self.max_gap, now - self._last)
-        self._last = now
-        self.ticks += 1
-
-    def start(self) -> None:
-        self._last = time.perf_counter()
-        self.timer.start()
-
-    def stop(self) -> None:
-        self.timer.stop()
-
-
 @pytest.fixture(scope="module")
 def ws(qapp, demo_dir, tmp_path_factory):
     """A shown workspace with the demo opened and registered into ``ir``."""
@@ -78,7 +51,9 @@ def ws(qapp, demo_dir, tmp_path_factory):
     _wait(qapp, lambda: not w.is_busy())
     w.raw_shown = {n: tv.view.displayed() for n, tv in w.raw_grid.views.items()}  # before any registration
     w.raw_result = w.result
-    probe = LatencyProbe()
+    from plantreg_gui.gui.stall_probe import StallProbe
+
+    probe = StallProbe()
     probe.start()
     t0 = time.perf_counter()
     w.run_registration("ir")
