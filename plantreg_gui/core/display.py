@@ -122,6 +122,10 @@ def auto_limits(img: np.ndarray, percentiles: tuple[float, float] = (1, 99),
 @lru_cache(maxsize=64)
 def colormap_lut(name: str) -> np.ndarray:
     """(256, 3) uint8 lookup table of a matplotlib colour map."""
+    from .cmap_tables import TABLES
+
+    if name in TABLES:  # the common maps without importing matplotlib (start-up of a pipeline)
+        return np.frombuffer(bytes.fromhex(TABLES[name]), dtype=np.uint8).reshape(256, 3).copy()
     import matplotlib
 
     cmap = matplotlib.colormaps[name]
