@@ -30,7 +30,8 @@ import numpy as np
 from .. import __version__
 from . import display
 from .errors import InputError
-from .imageio import atomic_output_dir, atomic_path_suffixed, atomic_write_text, write_png, write_tiff
+from .imageio import (atomic_output_dir, atomic_path_suffixed, atomic_write_text, dense_tiles, write_png,
+                      write_tiff_tiled)
 from .progress import Reporter, ensure_reporter
 from .recording import Recording
 from .register import AREA_NAMES, CASE_NAMES, RegistrationResult
@@ -42,6 +43,25 @@ SUMMARY_VERSION = 1
 #: Selectable parts of the output (``what``): float TIFFs, display PNGs, case maps, area map,
 #: point cloud, mosaic, summary.
 OUTPUTS = ("registered", "previews", "cases", "areas", "pointcloud", "mosaic", "summary")
+
+#: Other names accepted by :func:`parse_outputs` (the command line says ``ply``).
+OUTPUT_ALIASES = {"ply": "pointcloud"}
+
+
+def parse_outputs(text: str | Iterable[str] | None) -> tuple[str, ...]:
+    """``"registered,cases,ply"`` (or a list) -> the :data:`OUTPUTS` parts, in :data:`OUTPUTS` order;
+    None or ``"all"`` -> all. Unknown names raise :class:`InputError`."""
+    if text is None:
+        return OUTPUTS
+    words = [w.strip() for w in (text.split(",") if isinstance(text, str) else text) if w.strip()]
+    if words == ["all"]:
+        return OUTPUTS
+    parts = {OUTPUT_ALIASES.get(w, w) for w in words}
+    unknown = sorted(w for w in words if OUTPUT_ALIASES.get(w, w) not in OUTPUTS)
+    if unknown or not parts:
+        choices = ",".join(["registered", "cases", "areas", "ply", "previews", "mosaic", "summary"])
+        raise InputError(f"--outputs: unknown part(s) {', '.join(unknown) or '(none given)'}; choose from {choices} or all")
+    return tuple(o for o in OUTPUTS if o in parts)
 
 #: PLY vertex properties that are not camera values.
 _PLY_FIXED = ("x", "y", "z", "red", "green", "blue", "row", "col")
@@ -71,7 +91,7 @@ def write_outputs(
     left at ``out`` then).
     """
     rep = ensure_reporter(progress)
-    sel = set(OUTPUTS) if what is None else set(what)
+    sel = set(OUTPUTS) if what is None else {OUTPUT_ALIASES.get(w, w) for w in what}
     unknown = sel - set(OUTPUTS)
     if unknown:
         raise ValueError(f"unknown output parts {sorted(unknown)}; choose from {OUTPUTS}")
@@ -120,7 +140,8 @@ def write_outputs(
             t0 = time.perf_counter()
             if kind == "registered":
                 rel = f"registered/{_safe(cam)}.tif"
-                write_tiff(tmp / rel, np.asarray(result.registered[cam], dtype=np.float32))
+                reg = np.asarray(result.registered[cam], dtype=np.float32)  # deflate, tiled, empty tiles once
+                write_tiff_tiled(tmp / rel, reg.shape, np.float32, dense_tiles(reg))
             elif kind == "previews":
                 rel = f"registered/{_safe(cam)}.png"
                 write_png(tmp / rel, preview(cam))
@@ -194,14 +215,13 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
     per camera its registered value(s) as float32 (NaN where that camera is not mapped); per
     source camera ``<cam>_case`` uchar (the case code). Points with NaN coordinates are dropped.
     """
-    from plyfile import PlyData, PlyElement
-
     rep = ensure_reporter(progress)
     cams = list(result.registered) if cams is None else cams
     pts = np.asarray(result.points_rig, dtype=np.float32)
     H, W = result.shape
     ok = np.isfinite(pts).all(axis=2)
-    rows, cols = np.nonzero(ok)
+    flat = np.flatnonzero(ok.ravel())
+    rows, cols = np.divmod(flat, W)
     n = rows.size
     names = ply_property_names(result, cams)
     dtype: list[tuple[str, str]] = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
@@ -218,31 +238,40 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
         used.add(p)
         case_props[cam] = p
         dtype.append((p, "u1"))
-    v = np.empty(n, dtype=dtype)
-    sel = pts[rows, cols]
-    v["x"], v["y"], v["z"] = sel[:, 0], sel[:, 1], sel[:, 2]
+    dt = np.dtype(dtype)  # packed records, the PLY binary layout
+    v = np.empty(n, dtype=dt)
+    raw = v.view(np.uint8).reshape(n, dt.itemsize)
+
+    def columns(first: str, k: int, typ: str) -> np.ndarray:
+        """(n, k) view of ``k`` consecutive properties starting at ``first`` (one copy per camera,
+        not one Python-level assignment per band)."""
+        off = dt.fields[first][1]
+        return np.ndarray((n, k), dtype=typ, buffer=raw, offset=off, strides=(dt.itemsize, np.dtype(typ).itemsize))
+
+    columns("x", 3, "<f4")[:] = pts.reshape(-1, 3)[flat]
     if colours_rgb8 is not None:
-        c = np.asarray(colours_rgb8)[rows, cols]
-        v["red"], v["green"], v["blue"] = c[:, 0], c[:, 1], c[:, 2]
+        columns("red", 3, "u1")[:] = np.asarray(colours_rgb8).reshape(-1, 3)[flat]
     else:
-        v["red"] = v["green"] = v["blue"] = 200
+        columns("red", 3, "u1")[:] = 200
     v["row"], v["col"] = rows, cols
     for k, cam in enumerate(cams):
         rep(0.8 * k / max(len(cams), 1), f"point cloud: {cam}")
-        vals = np.asarray(result.registered[cam], dtype=np.float32)[rows, cols]
-        if vals.ndim == 1:
-            v[names[cam][0]] = vals
-        else:
-            for b, p in enumerate(names[cam]):
-                v[p] = vals[:, b]
+        reg = np.asarray(result.registered[cam], dtype=np.float32)
+        vals = reg.reshape(H * W, -1)[flat]
+        columns(names[cam][0], len(names[cam]), "<f4")[:] = vals
     for cam, p in case_props.items():
-        v[p] = np.asarray(result.cases[cam], dtype=np.uint8)[rows, cols]
+        v[p] = np.asarray(result.cases[cam], dtype=np.uint8).ravel()[flat]
     rep(0.85, "point cloud: writing")
-    el = PlyElement.describe(v, "vertex")
+    comment = (f"plantreg {__version__}: object-mesh hits of target '{result.target}' rays, "
+               f"rig frame, metres; target image {W}x{H}")
+    ply_types = {"<f4": "float", "u1": "uchar", "<i4": "int"}
+    header = ["ply", "format binary_little_endian 1.0", f"comment {comment}", f"element vertex {n}"]
+    header += [f"property {ply_types[t]} {name}" for name, t in dtype]
+    header.append("end_header")
     with atomic_path_suffixed(path) as tmp:
-        PlyData([el], text=False, byte_order="<",
-                comments=[f"plantreg {__version__}: object-mesh hits of target '{result.target}' rays, "
-                          f"rig frame, metres; target image {W}x{H}"]).write(str(tmp))
+        with open(tmp, "wb") as f:
+            f.write(("\n".join(header) + "\n").encode("ascii"))
+            f.write(raw.data)
     return n
 
 
