@@ -295,6 +295,15 @@ class Registrar:
         self.timings: dict[str, float] = {}
 
     # -- caches
+    def ray_cache(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """The pixel-ray caches (camera name -> rays), for :meth:`use_ray_cache` of another
+        Registrar of the same rig (a batch: rays depend on the cameras only)."""
+        return self._rays_cam, self._rays_rig
+
+    def use_ray_cache(self, cache: tuple[dict[str, np.ndarray], dict[str, np.ndarray]]) -> None:
+        """Share the pixel rays of another Registrar of the *same rig* (see :meth:`ray_cache`)."""
+        self._rays_cam, self._rays_rig = cache
+
     def _camera_rays(self, cam: Camera) -> np.ndarray:
         if cam.name not in self._rays_cam:
             self._rays_cam[cam.name] = pixel_rays_cam(cam)
