@@ -112,14 +112,11 @@ def run(args: argparse.Namespace) -> int:
     check_output_spares_inputs(out, [rig_path] + [Path(j.recording) for j in jobs])
     out.mkdir(parents=True, exist_ok=True)
     settings = batch.BatchSettings(rig=str(rig_path), target=args.target, out=str(out), params=params.to_dict(),
-                                   outputs=what, overwrite=bool(args.overwrite))
+                                   outputs=what, overwrite=bool(args.overwrite),
+                                   tiff_codec=args.tiff_codec)
     workers = args.workers or os.cpu_count() or 1
-    if args.scheduler:
-        rows_iter = batch.run_dask(settings, jobs, args.scheduler)
-        engine = f"Dask scheduler {args.scheduler}"
-    else:
-        rows_iter = batch.run_local(settings, jobs, workers)
-        engine = f"{min(workers, len(jobs))} local worker process(es)"
+    rows_iter = batch.run(settings, jobs, workers, args.scheduler)
+    engine = f"Dask scheduler {args.scheduler}" if args.scheduler else f"up to {workers} local worker process(es)"
     if not args.quiet:
         print(f"plantreg batch: {len(jobs)} recording(s) on {engine}", file=sys.stderr, flush=True)
 

@@ -1,7 +1,7 @@
 """``plantreg register``: register every camera of a recording into one target camera's view.
 
     plantreg register --rig RIG --recording DIR --target NAME --out OUT
-                      [--edge-angle DEG] [--outputs PARTS] [--overwrite] [--quiet]
+                      [--edge-angle DEG] [--outputs PARTS] [--tiff-codec C] [--overwrite] [--quiet]
 
 Writes the output folder described in ``docs/outputs.md`` (see :mod:`plantreg_gui.core.export`)
 and prints, per source camera, the share of target pixels in each projection case.
@@ -46,6 +46,9 @@ def add_output_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--outputs", default=None, metavar="PARTS",
                    help="comma-separated parts of the output to write: registered,cases,areas,ply,previews,"
                    "mosaic,summary (default: all)")
+    p.add_argument("--tiff-codec", default="deflate-fp", choices=("deflate-fp", "deflate", "zstd"),
+                   help="lossless compression of the registered TIFFs (default deflate-fp: deflate with the "
+                   "floating-point predictor; zstd is faster but not read by ImageJ/Fiji)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -87,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
     result = Registrar(rig, recording, params).register(args.target, progress.sub(0.0, 0.85))
     write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0), what=what,
+                  tiff_codec=args.tiff_codec,
                   inputs={"rig": rig_path.resolve(), "recording": Path(args.recording).resolve(),
                           "command": _command_line(args)})
 
@@ -114,6 +118,8 @@ def _command_line(args: argparse.Namespace) -> str:
         parts += ["--edge-angle", f"{args.edge_angle:g}"]
     if args.outputs is not None:
         parts += ["--outputs", args.outputs]
+    if args.tiff_codec != "deflate-fp":
+        parts += ["--tiff-codec", args.tiff_codec]
     if args.overwrite:
         parts.append("--overwrite")
     return " ".join(parts)

@@ -30,7 +30,7 @@ import json
 import os
 import socket
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
@@ -55,6 +55,7 @@ class BatchSettings:
     params: dict[str, Any] = field(default_factory=dict)   # RegistrationParams fields
     outputs: tuple[str, ...] = ()          # export parts (summary is always written: resume needs it)
     overwrite: bool = False
+    tiff_codec: str = "deflate-fp"
 
 
 @dataclass
@@ -140,7 +141,8 @@ def job_hash(settings: BatchSettings, recording: str | Path) -> str:
 
     add("rig", Path(settings.rig).read_bytes())
     add("settings", json.dumps({"target": settings.target, "params": settings.params,
-                                "outputs": sorted(settings.outputs)}, sort_keys=True).encode())
+                                "outputs": sorted(settings.outputs),
+                                "tiff_codec": settings.tiff_codec}, sort_keys=True).encode())
     manifest = rec / "recording.json"
     add("manifest", manifest.read_bytes())
     m = json.loads(manifest.read_text(encoding="utf-8"))
@@ -257,7 +259,7 @@ def _run_job(settings: BatchSettings, job: Job, out: Path) -> dict[str, Any]:
     t_reg = time.perf_counter() - t
     t = time.perf_counter()
     what = tuple(dict.fromkeys([*settings.outputs, "summary"]))
-    write_outputs(result, rig, recording, out, overwrite=True, what=what,
+    write_outputs(result, rig, recording, out, overwrite=True, what=what, tiff_codec=settings.tiff_codec,
                   inputs={"rig": Path(settings.rig), "recording": Path(job.recording), "batch_hash": h,
                           "command": "plantreg batch"})
     t_write = time.perf_counter() - t
@@ -283,6 +285,41 @@ def _row_from_summary(out: Path) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------- engines
+def skipped_row(settings: BatchSettings, job: Job) -> dict[str, Any] | None:
+    """The row of a job whose output is already complete and made from the same inputs and
+    parameters (checked in the submitting process: no worker needs to start), else None."""
+    out = Path(settings.out) / job.name
+    if settings.overwrite or not out.is_dir():
+        return None
+    try:
+        h = job_hash(settings, job.recording)
+    except (OSError, ValueError):
+        return None
+    if existing_hash(out) != h:
+        return None
+    return {"recording": job.recording, "name": job.name, "status": "skipped", "error": "", "out": str(out),
+            "attempts": 0, **_row_from_summary(out)}
+
+
+def run(settings: BatchSettings, jobs: list[Job], workers: int = 1,
+        scheduler: str | None = None) -> Iterator[dict[str, Any]]:
+    """Yield one row per job as jobs finish: first the ones to skip, then the others from a
+    local pool of ``workers`` processes or, with ``scheduler``, from a Dask cluster."""
+    todo = []
+    for j in jobs:
+        row = skipped_row(settings, j)
+        if row is None:
+            todo.append(j)
+        else:
+            yield row
+    if not todo:
+        return
+    if scheduler:
+        yield from run_dask(settings, todo, scheduler)
+    else:
+        yield from run_local(settings, todo, workers)
+
+
 def _failed_row(job: Job, settings: BatchSettings, error: str, attempts: int) -> dict[str, Any]:
     return {"recording": job.recording, "name": job.name, "status": "failed", "error": error,
             "out": str(Path(settings.out) / job.name), "files": "", "attempts": attempts}
@@ -397,5 +434,5 @@ def write_csv(path: str | Path, rows: list[dict[str, Any]]) -> None:
     atomic_write_text(path, buf.getvalue())
 
 
-__all__ = ["BatchSettings", "Job", "plan", "read_manifest", "expand_inputs", "job_hash", "run_job",
-           "run_local", "run_dask", "write_csv", "BATCH_CSV", "asdict"]
+__all__ = ["BatchSettings", "Job", "plan", "read_manifest", "expand_inputs", "job_hash", "run_job", "run",
+           "run_local", "run_dask", "skipped_row", "write_csv", "BATCH_CSV"]

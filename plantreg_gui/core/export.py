@@ -1,7 +1,8 @@
 """Write a registration result to an output folder (the layout ``plantreg register --out`` promises).
 
 ```
-OUT/registered/<camera>.tif   float32, target H x W (x bands), NaN where not mapped
+OUT/registered/<camera>.tif   float32, target H x W (x bands), NaN where not mapped; tiled, lossless
+                              deflate + floating-point predictor (imageio.TIFF_CODECS)
 OUT/registered/<camera>.png   display preview (colour map / PCA false colour, contrast stretched)
 OUT/cases/<camera>.png        uint8 case code per target pixel, every source camera
 OUT/areas.png                 uint8 area code per target pixel (4 = P4, 5 = P5, 6 = P6)
@@ -30,8 +31,8 @@ import numpy as np
 from .. import __version__
 from . import display
 from .errors import InputError
-from .imageio import (atomic_output_dir, atomic_path_suffixed, atomic_write_text, dense_tiles, write_png,
-                      write_tiff_tiled)
+from .imageio import (TIFF_CODEC_DEFAULT, atomic_output_dir, atomic_path_suffixed, atomic_write_text,
+                      dense_tiles, write_png, write_tiff_tiled)
 from .progress import Reporter, ensure_reporter
 from .recording import Recording
 from .register import AREA_NAMES, CASE_NAMES, RegistrationResult
@@ -77,6 +78,7 @@ def write_outputs(
     inputs: dict[str, Any] | None = None,
     what: Iterable[str] | None = None,
     display_options: Mapping[str, Mapping[str, Any]] | None = None,
+    tiff_codec: str = TIFF_CODEC_DEFAULT,
 ) -> Path:
     """Write ``result`` into the folder ``out`` (layout in the module docstring); returns ``out``.
 
@@ -85,6 +87,7 @@ def write_outputs(
     :data:`OUTPUTS` (default: all). ``display_options`` maps a camera name to keyword
     arguments of :func:`display.to_rgb8` (cmap, limits, percentiles, bands) for the previews,
     the mosaic and the point-cloud colours, so an export looks like the GUI's view.
+    ``tiff_codec``: the registered TIFFs' lossless compression (:data:`~.imageio.TIFF_CODECS`).
 
     Raises :class:`InputError` if ``out`` exists and is not empty and ``overwrite`` is False;
     :class:`~plantreg_gui.core.errors.Cancelled` if cancelled through ``progress`` (nothing is
@@ -141,7 +144,7 @@ def write_outputs(
             if kind == "registered":
                 rel = f"registered/{_safe(cam)}.tif"
                 reg = np.asarray(result.registered[cam], dtype=np.float32)  # deflate, tiled, empty tiles once
-                write_tiff_tiled(tmp / rel, reg.shape, np.float32, dense_tiles(reg))
+                write_tiff_tiled(tmp / rel, reg.shape, np.float32, dense_tiles(reg), codec=tiff_codec)
             elif kind == "previews":
                 rel = f"registered/{_safe(cam)}.png"
                 write_png(tmp / rel, preview(cam))
