@@ -345,3 +345,49 @@ def test_register_does_not_import_what_it_does_not_use(demo_dir, tmp_path):
     assert p.returncode == 0, p.stderr[-2000:]
     mods = eval(p.stdout.strip().splitlines()[-1])  # noqa: S307 - our own printout
     assert "open3d.pybind" in mods and not [m for m in mods if m.startswith(("dash", "plotly", "open3d.visualization"))]
+
+
+# ---------------------------------------------------------------------- bounded memory: HitImage
+def test_hit_images_equal_the_dense_registration(demo_dir, tmp_path, monkeypatch):
+    """Above the size limit the registered images are kept at the hits only; every way of reading
+    them (dense, blocks, pixels, the written TIFF and PLY, previews) gives the dense result."""
+    from plyfile import PlyData
+
+    from plantreg_gui.core import register as register_mod
+    from plantreg_gui.core.display import to_rgb8
+    from plantreg_gui.core.export import write_outputs
+    from plantreg_gui.core.hits import HitImage
+
+    rig = Rig.load(demo_dir / "rig.json")
+    rec = Recording.load(demo_dir / "recording", rig)
+    dense = Registrar(rig, rec).register("rgb")
+    monkeypatch.setattr(register_mod, "DENSE_LIMIT_BYTES", 0)
+    sparse = Registrar(rig, rec).register("rgb")
+    assert all(isinstance(v, HitImage) for v in sparse.registered.values())
+    H, W = dense.shape
+    rng = np.random.default_rng(3)
+    for cam, ref in dense.registered.items():
+        hi = sparse.registered[cam]
+        assert hi.shape == ref.shape and hi.ndim == ref.ndim and hi.dtype == np.float32
+        assert np.array_equal(np.asarray(hi), ref, equal_nan=True), cam
+        for r0, c0 in rng.integers(0, [H - 40, W - 40], size=(5, 2)):
+            blk = hi.block(r0, r0 + 37, c0, c0 + 40)
+            want = ref[r0:r0 + 37, c0:c0 + 40]
+            assert (blk is None and np.isnan(want).all()) or np.array_equal(blk, want, equal_nan=True)
+        obj = np.argwhere(np.isfinite(ref if ref.ndim == 2 else ref[..., 0]))
+        for r, c in [*obj[:: max(1, len(obj) // 7)], (0, 0), (H - 1, W - 1)]:
+            assert np.array_equal(hi[int(r), int(c)], ref[int(r), int(c)], equal_nan=True)
+        assert np.array_equal(np.isfinite(hi), np.isfinite(ref))  # ufuncs see the dense image
+        mod = rig.camera(cam).modality
+        assert np.array_equal(to_rgb8(hi, modality=mod), to_rgb8(ref, modality=mod)), cam
+    out_d, out_s = tmp_path / "d", tmp_path / "s"
+    write_outputs(dense, rig, rec, out_d, what=["registered", "ply", "summary"])
+    write_outputs(sparse, rig, rec, out_s, what=["registered", "ply", "summary"])
+    for cam in dense.registered:
+        a = tifffile.imread(out_s / "registered" / f"{cam}.tif")
+        assert np.array_equal(a, dense.registered[cam], equal_nan=True)
+    vd = PlyData.read(str(out_d / "pointcloud.ply"))["vertex"].data
+    vs = PlyData.read(str(out_s / "pointcloud.ply"))["vertex"].data
+    assert vd.dtype == vs.dtype and vd.tobytes() == vs.tobytes()
+    sd, ss = (json.loads((o / "summary.json").read_text()) for o in (out_d, out_s))
+    assert sd["cameras"] == ss["cameras"] and sd["cases"] == ss["cases"]

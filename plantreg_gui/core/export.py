@@ -35,6 +35,7 @@ from .imageio import (TIFF_CODEC_DEFAULT, atomic_output_dir, atomic_path_suffixe
                       dense_tiles, write_png, write_tiff_tiled)
 from .progress import Reporter, ensure_reporter
 from .recording import Recording
+from .hits import HitImage
 from .register import AREA_NAMES, CASE_NAMES, RegistrationResult
 from .rig import Rig
 
@@ -143,8 +144,12 @@ def write_outputs(
             t0 = time.perf_counter()
             if kind == "registered":
                 rel = f"registered/{_safe(cam)}.tif"
-                reg = np.asarray(result.registered[cam], dtype=np.float32)  # deflate, tiled, empty tiles once
-                write_tiff_tiled(tmp / rel, reg.shape, np.float32, dense_tiles(reg), codec=tiff_codec)
+                reg = result.registered[cam]  # tiled, compressed, empty tiles encoded once
+                if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
+                    write_tiff_tiled(tmp / rel, reg.shape, np.float32, reg.block, codec=tiff_codec)
+                else:
+                    reg = np.asarray(reg, dtype=np.float32)
+                    write_tiff_tiled(tmp / rel, reg.shape, np.float32, dense_tiles(reg), codec=tiff_codec)
             elif kind == "previews":
                 rel = f"registered/{_safe(cam)}.png"
                 write_png(tmp / rel, preview(cam))
@@ -202,7 +207,7 @@ def ply_property_names(result: RegistrationResult, cams: list[str] | None = None
         if base in used or base.lower() in used:
             base = f"{base}_value"
         b = _bands(result.registered[cam])
-        props = [base] if np.asarray(result.registered[cam]).ndim == 2 else [f"{base}_b{i:03d}" for i in range(b)]
+        props = [base] if len(result.registered[cam].shape) == 2 else [f"{base}_b{i:03d}" for i in range(b)]
         props = [p if p not in used else f"{p}_{len(used)}" for p in props]
         used.update(props)
         names[cam] = props
@@ -259,8 +264,7 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
     v["row"], v["col"] = rows, cols
     for k, cam in enumerate(cams):
         rep(0.8 * k / max(len(cams), 1), f"point cloud: {cam}")
-        reg = np.asarray(result.registered[cam], dtype=np.float32)
-        vals = reg.reshape(H * W, -1)[flat]
+        vals = _values_at(result.registered[cam], flat, H * W)
         columns(names[cam][0], len(names[cam]), "<f4")[:] = vals
     for cam, p in case_props.items():
         v[p] = np.asarray(result.cases[cam], dtype=np.uint8).ravel()[flat]
@@ -303,14 +307,18 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
              for c in sorted(AREA_NAMES)}
     cameras = {}
     for cam in _camera_order(result, rig):
-        reg = np.asarray(result.registered[cam])
-        mapped = np.isfinite(reg).all(axis=2) if reg.ndim == 3 else np.isfinite(reg)
+        reg = result.registered[cam]
+        if isinstance(reg, HitImage):  # NaN off the hits by construction
+            n_mapped = int(np.isfinite(reg.values).all(axis=1).sum())
+        else:
+            reg = np.asarray(reg)
+            n_mapped = int((np.isfinite(reg).all(axis=2) if reg.ndim == 3 else np.isfinite(reg)).sum())
         c = _rig_camera(rig, cam)
         cameras[cam] = {
             "modality": c.modality if c is not None else None,
             "size": [c.width, c.height] if c is not None else None,
             "bands": _bands(reg),
-            "mapped_pixels": int(mapped.sum()),
+            "mapped_pixels": n_mapped,
             "role": "target" if cam == result.target else "source",
         }
     n_points = int(np.isfinite(np.asarray(result.points_rig)).all(axis=2).sum())
@@ -396,8 +404,20 @@ def _ply_name(name: str) -> str:
 
 
 def _bands(a: np.ndarray) -> int:
-    a = np.asarray(a)
-    return int(a.shape[2]) if a.ndim == 3 else 1
+    shape = a.shape if hasattr(a, "shape") else np.shape(a)  # a HitImage is not expanded for this
+    return int(shape[2]) if len(shape) == 3 else 1
+
+
+def _values_at(reg: Any, flat: np.ndarray, n: int) -> np.ndarray:
+    """(len(flat), C) float32 values of a registered image at row-major pixel indices ``flat``."""
+    if isinstance(reg, HitImage):
+        out = np.full((len(flat), reg.bands), np.nan, dtype=np.float32)
+        if len(reg.index):
+            pos = np.minimum(np.searchsorted(reg.index, flat), len(reg.index) - 1)
+            ok = reg.index[pos] == flat
+            out[ok] = reg.values[pos[ok]]
+        return out
+    return np.asarray(reg, dtype=np.float32).reshape(n, -1)[flat]
 
 
 def _rig_camera(rig: Rig, name: str):
