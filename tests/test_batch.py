@@ -391,3 +391,34 @@ def test_hit_images_equal_the_dense_registration(demo_dir, tmp_path, monkeypatch
     assert vd.dtype == vs.dtype and vd.tobytes() == vs.tobytes()
     sd, ss = (json.loads((o / "summary.json").read_text()) for o in (out_d, out_s))
     assert sd["cameras"] == ss["cameras"] and sd["cases"] == ss["cases"]
+
+
+@pytest.mark.slow
+def test_local_worker_killed_mid_write_is_retried(recordings, tmp_path):
+    import psutil
+
+    rig, good, _ = recordings
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "plantreg_gui", "batch", "--rig", str(rig), "--target", "ir", "--out", str(out),
+           "--workers", "1", *map(str, good[:2])]
+    proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        part = _wait_for(lambda: next(iter(out.glob(".plant*.part")), None) if out.is_dir() else None, 240,
+                         "the worker writing an output folder")
+        workers = [c for c in psutil.Process(proc.pid).children(recursive=True)
+                   if "spawn_main" in " ".join(c.cmdline()) and "resource_tracker" not in " ".join(c.cmdline())]
+        assert len(workers) == 1
+        workers[0].kill()
+        stdout, stderr = proc.communicate(timeout=400)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, stderr
+    rows = _rows(out)
+    killed = part.name[1:].split(".")[0]
+    assert rows[killed]["status"] == "done" and rows[killed]["attempts"] == "2"
+    assert {r["status"] for r in rows.values()} == {"done"}
+    for name in rows:
+        s = json.loads((out / name / "summary.json").read_text())
+        assert all((out / name / f).is_file() for f in s["files"])
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["batch.csv", "plant0", "plant1"]

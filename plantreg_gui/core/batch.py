@@ -355,16 +355,24 @@ def run_local(settings: BatchSettings, jobs: list[Job], workers: int) -> Iterato
     while todo:
         with ProcessPoolExecutor(max_workers=max(1, min(workers, len(todo))), mp_context=ctx,
                                  initializer=_preload) as pool:
-            futures = {}
-            for j in todo:
-                futures[pool.submit(run_job, settings, j)] = j
-            todo = []
-            pending = set(futures)
+            # at most one job per worker in flight: when the pool breaks, exactly the jobs that
+            # were running lose an attempt, not the ones still waiting
+            queue, todo = todo, []
+            futures: dict = {}
             broken = False
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            while (queue and not broken) or futures:
+                while queue and not broken and len(futures) < max(1, workers):
+                    j = queue.pop(0)
+                    try:
+                        futures[pool.submit(run_job, settings, j)] = j
+                    except BrokenProcessPool:
+                        broken = True
+                        queue.insert(0, j)
+                if not futures:
+                    break
+                done, _ = wait(set(futures), return_when=FIRST_COMPLETED)
                 for f in done:
-                    j = futures[f]
+                    j = futures.pop(f)
                     try:
                         row = f.result()
                     except BrokenProcessPool:
@@ -382,6 +390,7 @@ def run_local(settings: BatchSettings, jobs: list[Job], workers: int) -> Iterato
                         continue
                     row["attempts"] = attempts[j.name] + 1
                     yield row
+            todo += queue
             if broken:
                 pool.shutdown(wait=False, cancel_futures=True)
 
