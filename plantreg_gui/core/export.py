@@ -247,14 +247,40 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
         case_props[cam] = p
         dtype.append((p, "u1"))
     dt = np.dtype(dtype)  # packed records, the PLY binary layout
-    v = np.empty(n, dtype=dt)
-    raw = v.view(np.uint8).reshape(n, dt.itemsize)
+    comment = (f"plantreg {__version__}: object-mesh hits of target '{result.target}' rays, "
+               f"rig frame, metres; target image {W}x{H}")
+    ply_types = {"<f4": "float", "u1": "uchar", "<i4": "int"}
+    header = ["ply", "format binary_little_endian 1.0", f"comment {comment}", f"element vertex {n}"]
+    header += [f"property {ply_types[t]} {name}" for name, t in dtype]
+    header.append("end_header")
+    # records are packed and written in chunks of ~64 MB: a 4K target's hits with 204 bands
+    # would otherwise need the whole cloud (and its values) in memory twice
+    step = max(1024, (64 << 20) // dt.itemsize)
+    with atomic_path_suffixed(path) as tmp:
+        with open(tmp, "wb") as f:
+            f.write(("\n".join(header) + "\n").encode("ascii"))
+            for a in range(0, n, step):
+                rep(0.95 * a / max(n, 1), "point cloud")
+                f.write(_ply_records(result, cams, names, case_props, dt, colours_rgb8, pts, flat[a : a + step],
+                                     rows[a : a + step], cols[a : a + step]).data)
+    rep(1.0, "point cloud")
+    return n
+
+
+def _ply_records(result: RegistrationResult, cams: list[str], names: dict[str, list[str]],
+                 case_props: dict[str, str], dt: np.dtype, colours_rgb8: np.ndarray | None, pts: np.ndarray,
+                 flat: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """The packed PLY records (m, itemsize) uint8 of the hits at row-major pixel indices ``flat`` (m,)."""
+    H, W = result.shape
+    m = len(flat)
+    raw = np.empty((m, dt.itemsize), dtype=np.uint8)
+    v = raw.view(dt).reshape(m)
 
     def columns(first: str, k: int, typ: str) -> np.ndarray:
-        """(n, k) view of ``k`` consecutive properties starting at ``first`` (one copy per camera,
+        """(m, k) view of ``k`` consecutive properties starting at ``first`` (one copy per camera,
         not one Python-level assignment per band)."""
         off = dt.fields[first][1]
-        return np.ndarray((n, k), dtype=typ, buffer=raw, offset=off, strides=(dt.itemsize, np.dtype(typ).itemsize))
+        return np.ndarray((m, k), dtype=typ, buffer=raw, offset=off, strides=(dt.itemsize, np.dtype(typ).itemsize))
 
     columns("x", 3, "<f4")[:] = pts.reshape(-1, 3)[flat]
     if colours_rgb8 is not None:
@@ -262,24 +288,11 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
     else:
         columns("red", 3, "u1")[:] = 200
     v["row"], v["col"] = rows, cols
-    for k, cam in enumerate(cams):
-        rep(0.8 * k / max(len(cams), 1), f"point cloud: {cam}")
-        vals = _values_at(result.registered[cam], flat, H * W)
-        columns(names[cam][0], len(names[cam]), "<f4")[:] = vals
+    for cam in cams:
+        columns(names[cam][0], len(names[cam]), "<f4")[:] = _values_at(result.registered[cam], flat, H * W)
     for cam, p in case_props.items():
-        v[p] = np.asarray(result.cases[cam], dtype=np.uint8).ravel()[flat]
-    rep(0.85, "point cloud: writing")
-    comment = (f"plantreg {__version__}: object-mesh hits of target '{result.target}' rays, "
-               f"rig frame, metres; target image {W}x{H}")
-    ply_types = {"<f4": "float", "u1": "uchar", "<i4": "int"}
-    header = ["ply", "format binary_little_endian 1.0", f"comment {comment}", f"element vertex {n}"]
-    header += [f"property {ply_types[t]} {name}" for name, t in dtype]
-    header.append("end_header")
-    with atomic_path_suffixed(path) as tmp:
-        with open(tmp, "wb") as f:
-            f.write(("\n".join(header) + "\n").encode("ascii"))
-            f.write(raw.data)
-    return n
+        v[p] = np.asarray(result.cases[cam], dtype=np.uint8).reshape(-1)[flat]
+    return raw
 
 
 # ---------------------------------------------------------------------- summary

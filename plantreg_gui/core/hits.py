@@ -76,16 +76,18 @@ class HitImage:
     def block(self, r0: int, r1: int, c0: int, c1: int) -> np.ndarray | None:
         """Rows r0..r1-1, columns c0..c1-1 as (r1-r0, c1-c0[, C]) float32; None if no hit lies there."""
         W = self.shape[1]
-        a, b = np.searchsorted(self.index, [r0 * W, r1 * W])
-        if a == b:
+        # per row of the block, the run of hits between its first and last column (sorted index)
+        starts = np.arange(r0, r1, dtype=np.int64) * W
+        lo = np.searchsorted(self.index, starts + c0)
+        hi = np.searchsorted(self.index, starts + c1)
+        cnt = hi - lo
+        total = int(cnt.sum())
+        if total == 0:
             return None
-        idx = self.index[a:b]
-        r, c = np.divmod(idx, W)
-        sel = np.flatnonzero((c >= c0) & (c < c1))
-        if sel.size == 0:
-            return None
+        pos = np.repeat(lo - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt) + np.arange(total)
+        r, c = np.divmod(self.index[pos], W)
         out = np.full((r1 - r0, c1 - c0, self.bands), np.nan, dtype=np.float32)
-        out[r[sel] - r0, c[sel] - c0] = self.values[a + sel]
+        out[r - r0, c - c0] = self.values[pos]
         return out if self.ndim == 3 else out[:, :, 0]
 
     def __getitem__(self, key: Any) -> Any:
