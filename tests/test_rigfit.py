@@ -80,7 +80,7 @@ def test_fit_registers_an_unseen_plant(true_rig, plants, unseen, rng_seed):
     off by 3 degrees, 3 cm and 3 % focal; focal lengths free.
 
     The issue asks median <= 0.3 px and p90 <= 0.6 px. That is below what 24 clicks of 0.7 px per
-    axis can determine for a 7-parameter camera: over 12 seed sets the medians ranged 0.18-0.52 px
+    axis can determine for a 7-parameter camera: over 6 other seed sets the medians ranged 0.18-0.52 px
     (pose-only fits with the exact focal: 0.17-0.39 px), and noise-free landmarks give <= 0.07 px
     (test below), so the limit is the clicks, not the method. Asserted here: what was measured
     on every seed set tried, with a margin (median <= 0.6, p90 <= 1.1 px); the second parameter
