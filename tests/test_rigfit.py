@@ -284,3 +284,23 @@ def test_nominal_camera_from_a_datasheet():
     with pytest.raises(InputError):
         nominal_camera("x", "rgb", 640, 480, 190.0)
     assert isinstance(Priors().rotation_deg, float)
+
+
+def test_leave_one_out_skips_cameras_too_thin_in_a_fold_and_evaluate(true_rig):
+    """Thermal seen in one recording only: its fold is 'unavailable', the other cameras still get
+    leave-one-out residuals; evaluate_landmarks gives the residuals of a rig without fitting."""
+    from plantreg_gui.core.rigfit import evaluate_landmarks
+
+    rng = np.random.default_rng(17)
+    recs = landmark_recordings(true_rig, (31, 32), rng)
+    for lm in recs[1].points:
+        del lm.cameras["thermal"]
+    res = fit_rig(true_rig, recs)
+    loo = res.report["leave_one_out"]["per_recording"]
+    assert "unavailable" in loo["plant31"]["thermal"] and loo["plant31"]["rgb"]["n"] == 12
+    assert any("camera thermal" in w for w in res.warnings)
+    rows, rejected = evaluate_landmarks(true_rig, recs)
+    assert len(rows) == 12 * 3 + 12 * 2 and not rejected
+    # the true rig: residuals are the clicks' noise (0.7 px per axis) and the 1 mm depth steps
+    assert np.median([r["residual_px"] for r in rows]) < 1.2
+    assert rows[0]["residual_px"] == max(r["residual_px"] for r in rows)

@@ -552,6 +552,9 @@ def fit_rig(rig: Rig, recordings: Sequence[RecordingLandmarks], *, free: Iterabl
         for rec, v in report["leave_one_out"]["per_recording"].items():
             if "unavailable" in v:
                 warnings.append(f"leave-one-out without {rec}: {v['unavailable']}")
+            else:
+                warnings += [f"leave-one-out without {rec}, camera {c}: {s['unavailable']}"
+                             for c, s in v.items() if "unavailable" in s]
     else:
         report["leave_one_out"] = {"unavailable": "needs landmarks from at least two recordings"}
     report["time_s"] = round(time.perf_counter() - t0, 3)
@@ -579,35 +582,68 @@ def _nested_stats(rows: list[dict]) -> dict[str, Any]:
     return out
 
 
+def evaluate_landmarks(rig: Rig, recordings: Sequence[RecordingLandmarks], cameras: Iterable[str] | None = None
+                       ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Residuals of ``rig`` on landmarks without fitting (e.g. independent landmarks kept out of
+    the fit, or the live residual next to a point being clicked).
+
+    Returns ``(rows, rejected)``: per landmark and camera ``{"recording", "index", "note",
+    "camera", "residual_px", "du", "dv"}`` (predicted minus clicked, px), worst first; and the
+    landmarks without depth, with the reason."""
+    cams = set(cameras) if cameras is not None else None
+    duv, z, keys, obs, rejected = _collect(rig, recordings, cams)
+    if not obs:
+        return [], rejected
+    dcam = rig.depth()
+    xy = dcam.undistort_normalized(duv)
+    X = dcam.to_rig(np.concatenate([xy, np.ones((len(xy), 1))], axis=1) * z[:, None])
+    rows = []
+    for o in obs:
+        ri, li = keys[o.lm]
+        uv, _ = rig.camera(o.cam).project(X[o.lm][None])
+        d = uv[0] - o.uv
+        rows.append({"recording": recordings[ri].name, "index": li, "note": recordings[ri].points[li].note,
+                     "camera": o.cam, "residual_px": float(np.hypot(*d)), "du": float(d[0]), "dv": float(d[1])})
+    rows.sort(key=lambda d: -d["residual_px"])
+    return rows, rejected
+
+
 def _leave_one_out(rig: Rig, recordings: Sequence[RecordingLandmarks], free: frozenset[str], priors: Priors,
                    cams_sel: set[str] | None) -> dict[str, Any]:
-    """Fit without each recording in turn and measure that recording's residuals (px)."""
+    """Fit without each recording in turn and measure that recording's residuals (px). A camera
+    with too few landmarks in the other recordings is left out of that fold (and said so)."""
     per_rec: dict[str, Any] = {}
     held: list[dict] = []
+    dname = rig.depth().name
     for k, rec in enumerate(recordings):
         rest = [r for i, r in enumerate(recordings) if i != k]
+        counts: dict[str, int] = {}
+        for r in rest:
+            for lm in r.points:
+                for c in lm.cameras:
+                    if c != dname and (cams_sel is None or c in cams_sel):
+                        counts[c] = counts.get(c, 0) + 1
+        mine = {c for lm in rec.points for c in lm.cameras if c != dname and (cams_sel is None or c in cams_sel)}
+        thin = {c: f"{counts.get(c, 0)} landmark(s) in the other recordings, fewer than the "
+                   f"{_min_landmarks(sum(FREE_ITEMS[i] for i in _free_for(free, c)))} a fit needs"
+                for c in mine
+                if counts.get(c, 0) < _min_landmarks(sum(FREE_ITEMS[i] for i in _free_for(free, c)))}
+        use = {c for c in counts if c not in thin}
+        if not use & mine:
+            per_rec[rec.name] = {"unavailable": "; ".join(f"{c}: {w}" for c, w in sorted(thin.items()))
+                                 or "no camera of this recording has landmarks elsewhere"}
+            continue
         try:
-            prob, x, *_ = _solve(rig, rest, free, priors, cams_sel)
+            prob, x, *_ = _solve(rig, rest, free, priors, use)
         except InputError as e:
             per_rec[rec.name] = {"unavailable": str(e)}
             continue
-        fitted = prob.to_rig(x)
-        duv, z, keys, obs, _rej = _collect(fitted, [rec], cams_sel)
-        if not obs:
-            per_rec[rec.name] = {"unavailable": "no usable landmark"}
-            continue
-        dcam = fitted.depth()
-        xy = dcam.undistort_normalized(duv)
-        X = dcam.to_rig(np.concatenate([xy, np.ones((len(xy), 1))], axis=1) * z[:, None])
-        rows = []
-        for o in obs:
-            if o.cam not in prob.cams:
-                continue  # a camera only this recording sees: nothing fitted to test
-            uv, _ = fitted.camera(o.cam).project(X[o.lm][None])
-            rows.append({"recording": rec.name, "camera": o.cam, "residual_px": float(np.linalg.norm(uv[0] - o.uv))})
-        per_rec[rec.name] = _stats_by(rows, ("camera",))
+        rows, _rej = evaluate_landmarks(prob.to_rig(x), [rec], set(prob.cams))
+        stats = _stats_by(rows, ("camera",)) if rows else {}
+        stats.update({c: {"unavailable": w} for c, w in thin.items()})
+        per_rec[rec.name] = stats
         held += rows
-    return {"per_recording": per_rec, "per_camera": _stats_by(held, ("camera",))}
+    return {"per_recording": per_rec, "per_camera": _stats_by(held, ("camera",)) if held else {}}
 
 
 def _changes(start: Rig, fitted: Rig, names: list[str]) -> dict[str, Any]:
