@@ -69,22 +69,30 @@ def run(args: argparse.Namespace) -> int:
     except InputError as e:
         raise InputError(f"{e.detail}; a landmark fit needs the depth camera", args.rig) from None
     landmarks = LandmarkSet.load(args.landmarks)
-    if landmarks.count() == 0:
-        raise InputError("the landmarks file has no points", args.landmarks)
-    result = fit_rig_from_file(rig, landmarks, free=free)
-    fitted, report, warnings = result.rig, result.report, list(result.warnings)
-    method = "landmarks"
+    if landmarks.count() > 0:
+        result = fit_rig_from_file(rig, landmarks, free=free)
+        fitted, report, warnings = result.rig, result.report, list(result.warnings)
+        method = "landmarks"
+    elif args.refine:  # no points: refine from the images alone, starting from the start rig
+        landmarks.check_recordings()
+        fitted, report, warnings, method = rig, {"landmarks_used": 0}, [], "refine"
+    else:
+        raise InputError("the landmarks file has no points (add some, or pass --refine to refine from the "
+                         "images alone)", args.landmarks)
     if args.refine:
         # the refinement is its own module (core/refine.py); imported only when asked for
         from ..core.recording import Recording
         from ..core.refine import refine_rig
         from ..core.progress import Reporter
 
-        folders = [landmarks.folder(k) for k in landmarks.recordings] + list(args.recording)
+        folders = [landmarks.folder(k).resolve() for k in landmarks.recordings]
+        folders += [f.resolve() for f in args.recording if f.resolve() not in folders]
         recordings = [Recording.load(f, fitted) for f in folders]
-        rr = refine_rig(fitted, recordings, free=free, landmarks=landmarks,
+        # keys as absolute folders: they match the recordings whatever the landmarks file's relative paths
+        by_folder = {str(landmarks.folder(k).resolve()): pts for k, pts in landmarks.recordings.items()}
+        rr = refine_rig(fitted, recordings, free=free, landmarks=by_folder,
                         progress=Reporter(cli.StderrProgress(quiet=args.quiet)))
-        fitted, method = rr.rig, "landmarks+refine"
+        fitted, method = rr.rig, ("landmarks+refine" if report.get("landmarks_used") else "refine")
         report["refine"] = rr.report
         warnings += list(rr.warnings)
     previous = rig.extra.get("calibration")
@@ -94,13 +102,14 @@ def run(args: argparse.Namespace) -> int:
         "command": "plantreg " + " ".join(getattr(args, "argv", []) or sys.argv[1:]),
         "start_rig": str(Path(args.rig).resolve()),
         "landmarks_file": str(Path(args.landmarks).resolve()),
-        **{k: v for k, v in report.items() if k != "time_s"},
+        **{k: v for k, v in report.items() if k not in ("time_s", "method")},
         "warnings": warnings,
         **({"previous_method": previous.get("method")} if isinstance(previous, dict) and previous.get("method")
            else {}),
     }
     fitted.save(out)
-    print(format_report(report, worst=args.worst))
+    if report.get("landmarks_used"):
+        print(format_report(report, worst=args.worst))
     if "refine" in report:
         print("refinement: see \"calibration\".\"refine\" in the rig file")
     for w in warnings:
