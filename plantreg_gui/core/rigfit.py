@@ -230,6 +230,8 @@ class _Problem:
         self.obs_lm = np.array([o.lm for o in obs], int)
         self.obs_uv = np.array([o.uv for o in obs]).reshape(-1, 2)
         self._dcache: tuple[bytes, np.ndarray] | None = None
+        #: cameras whose start pose PnP replaced: the start rig's pose was not credible, no pose prior
+        self.no_pose_prior: set[str] = set()
 
     # intrinsics from a parameter block
     def _intr(self, base: Camera, names: list[str], p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -293,8 +295,11 @@ class _Problem:
             p = x[self.slices[name]]
             i = 0
             if name != self.dcam.name:
-                out += list(p[:3] / math.radians(pr.rotation_deg))
-                out += list((p[3:6] - base.center_rig) / pr.position_m)
+                if name in self.no_pose_prior:
+                    out += [0.0] * 6
+                else:
+                    out += list(p[:3] / math.radians(pr.rotation_deg))
+                    out += list((p[3:6] - base.center_rig) / pr.position_m)
                 i = 6
             for k in names:
                 if k == "focal":
@@ -456,8 +461,17 @@ def _pnp_init(prob: _Problem, x: np.ndarray) -> dict[str, str]:
         med1 = float(np.median(np.linalg.norm(uv.reshape(-1, 2) - prob.obs_uv[idx], axis=1)))
         z = (obj.reshape(-1, 3) @ cv2.Rodrigues(rvec)[0].T + tvec.ravel())[:, 2]
         if med1 < med0 and np.all(z > 0):
-            prob.set_pose(x, c, cv2.Rodrigues(rvec)[0], tvec.ravel())
+            R1 = cv2.Rodrigues(rvec)[0]
+            prob.set_pose(x, c, R1, tvec.ravel())
             notes[c] = f"start pose from PnP/RANSAC (the start rig left a median of {med0:.1f} px, PnP {med1:.1f} px)"
+            base = prob.start.camera(c)
+            ang = math.degrees(np.linalg.norm(cv2.Rodrigues(R1 @ base.R_cam_rig.T)[0]))
+            moved = float(np.linalg.norm(-R1.T @ tvec.ravel() - base.center_rig))
+            if ang > 3 * prob.priors.rotation_deg or moved > 3 * prob.priors.position_m:
+                # three sigmas off: the start rig's pose of this camera is not credible as a prior
+                prob.no_pose_prior.add(c)
+                notes[c] += (f"; {ang:.0f} degrees and {100 * moved:.0f} cm from the start pose: no pose prior "
+                             "for this camera")
     return notes
 
 
@@ -490,6 +504,7 @@ def _solve(rig: Rig, recordings: Sequence[RecordingLandmarks], free: frozenset[s
     if out.any() and (~out).sum() >= 6:
         keep = ~out
         prob2 = _Problem(rig, duv, z, [o for o, k in zip(obs, keep) if k], cams, free, priors, rig)
+        prob2.no_pose_prior = prob.no_pose_prior
         if all(len(prob2.obs_idx[c]) >= 4 for c in cams):
             sol = least_squares(prob2.fun, x, jac_sparsity=prob2.sparsity(), **{k: v for k, v in kw.items()
                                                                                if k != "jac_sparsity"})
