@@ -335,8 +335,7 @@ class _Problem:
 
     def x0(self) -> np.ndarray:
         x = np.zeros(self.n)
-        for c in self.cams:
-            x[self.slices[c]][3:6] = 0  # placeholder; set below
+        for c in self.cams:  # rotation offsets 0 (= start rotation), optical centres of the start rig
             sl = self.slices[c]
             x[sl.start + 3:sl.start + 6] = self.start.camera(c).center_rig
         return x
@@ -714,7 +713,7 @@ def format_report(report: dict[str, Any], worst: int = 10) -> str:
         lines.append("  per recording (median px):")
         for rec, cams in per_rec.items():
             lines.append(f"    {rec}: " + "  ".join(f"{c} {s['median_px']:.2f}" for c, s in cams.items()))
-    lines.append(f"  worst landmarks:")
+    lines.append("  worst landmarks:")
     for d in report["residuals"][:worst]:
         lines.append(f"    {d['residual_px']:7.2f} px  {d['camera']:<14} {d['recording']} #{d['index']}"
                      + (f" ({d['note']})" if d["note"] else "") + ("  [outlier]" if d["outlier"] else ""))
