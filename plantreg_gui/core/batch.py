@@ -341,8 +341,6 @@ def run_local(settings: BatchSettings, jobs: list[Job], workers: int) -> Iterato
     failed (it may be what kills the worker, e.g. by running out of memory).
     """
     import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
 
     attempts = {j.name: 0 for j in jobs}
     todo = list(jobs)
@@ -350,8 +348,23 @@ def run_local(settings: BatchSettings, jobs: list[Job], workers: int) -> Iterato
     # the workers are the parallelism: a BLAS thread pool per worker only contends with the others
     # (a 204 x 204 eigen-decomposition for a preview took seconds with 2 workers x 2 BLAS threads)
     threads = str(max(1, (os.cpu_count() or 1) // max(1, workers)))
-    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(var, threads)  # inherited by the spawned workers
+    saved = {v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    for var, old in saved.items():
+        if old is None:
+            os.environ[var] = threads  # inherited by the spawned workers (spawned on demand: kept set)
+    try:
+        yield from _pool_rows(settings, todo, workers, attempts, ctx)
+    finally:
+        for var, old in saved.items():
+            if old is None:
+                os.environ.pop(var, None)
+
+
+def _pool_rows(settings: BatchSettings, todo: list[Job], workers: int, attempts: dict[str, int],
+               ctx) -> Iterator[dict[str, Any]]:
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
     while todo:
         with ProcessPoolExecutor(max_workers=max(1, min(workers, len(todo))), mp_context=ctx,
                                  initializer=_preload) as pool:
