@@ -35,6 +35,9 @@ if not DATA.is_dir():  # worktree layout /work/<tree>/resources/plant3dimagereg/
 def load(plant: str, cam: str) -> np.ndarray:
     if cam == "ir":
         return np.load(DATA / "infra_np" / f"{plant}.npy").astype(np.float64)
+    if cam == "irhp":  # infrared high-pass (veins): log(IR) minus its Gaussian blur (sigma 3 px)
+        a = np.log1p(np.load(DATA / "infra_np" / f"{plant}.npy").astype(np.float64))
+        return a - cv2.GaussianBlur(a, (0, 0), 3.0)
     if cam == "depth":
         return np.load(DATA / "lidar_depthmap_np" / f"{plant}.npy").astype(np.float64)
     if cam == "thermal":
@@ -76,7 +79,7 @@ def stretch(cam: str, a: np.ndarray, stretch_hs: bool = False) -> np.ndarray:
     return out
 
 
-ROT_TO_IR = {"ir": 0, "depth": 0, "thermal": 1, "hyperspectral": -1, "hs": -1, "pca": -1}
+ROT_TO_IR = {"ir": 0, "irhp": 0, "depth": 0, "thermal": 1, "hyperspectral": -1, "hs": -1, "pca": -1}
 """np.rot90 k that turns a camera's crop into the infrared's orientation (display only; the
 thermal is seen ~90 deg clockwise of the infrared, the hyperspectral ~90 deg anticlockwise)."""
 
