@@ -21,7 +21,7 @@ Sources (no calibration ships with the data set):
 * ``hyperspectral`` (Specim IQ render, 512 x 512, 31 x 31 deg): fx = fy = 256 / tan(15.5 deg) = 923.1,
   centre, no distortion; rotated ~90 deg anticlockwise: infrared up -> hyperspectral left.
 * Translations: a rough placement only, from a coarse silhouette alignment of the grapevine
-  (see README): the camera centre that makes the plant's centroid (at its depth) land where the
+  (see README): the camera offset (t_z = 0) that makes the plant's centroid (at its median depth) land where the
   silhouettes put it, with the nominal rotation. fit-rig refines them.
 * ROI: x in [-0.50, 0.36], y in [-0.60, 0.26], z in [0.30, 1.15] m (rig = depth camera frame).
   The tray under the plants is tilted ~16 deg in the depth camera frame (z 1.01 m at the image top,
@@ -49,8 +49,8 @@ F_HS = 256.0 / math.tan(math.radians(31.0 / 2))
 # rows = the camera's x (right) and y (down) axes in the rig (infrared) frame
 R_TH = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]   # thermal right = infrared up
 R_HS = [[0, 1, 0], [-1, 0, 0], [0, 0, 1]]   # hyperspectral right = infrared down
-T_TH = [0.0, 0.0, 0.0]
-T_HS = [0.0, 0.0, 0.0]
+T_TH = [-0.13, 0.03, 0.0]  # rough placement (coarse silhouette alignment of the grapevine, see README)
+T_HS = [0.12, -0.01, 0.0]
 
 
 def main() -> None:
