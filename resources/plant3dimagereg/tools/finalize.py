@@ -78,5 +78,27 @@ def main() -> None:
     print({k: len(v) for k, v in out.items()}, "dropped:", dropped)
 
 
+
+
+def agreement() -> None:
+    """RMS difference between the two readings, per camera (all read points, and the kept ones)."""
+    rd = json.loads((HERE / "eye_readings.json").read_text())
+    for subset in ("all", "kept"):
+        diffs: dict[str, list[float]] = {}
+        for name, r in rd.items():
+            cam = name.split("#")[0].split("/")[1]
+            di = float(np.linalg.norm(np.subtract(r["r1"]["ir"], r["r2"]["ir"])))
+            do = float(np.linalg.norm(np.subtract(r["r1"]["other"], r["r2"]["other"])))
+            if subset == "kept" and (di > AGREE["ir"] or do > AGREE["other"]):
+                continue
+            diffs.setdefault("ir", []).append(di)
+            diffs.setdefault(cam, []).append(do)
+        for c, v in diffs.items():
+            v = np.asarray(v)
+            print(f"{subset:4s} {c:13s} n={len(v):2d} rms {np.sqrt(np.mean(v ** 2)):.2f} px  median {np.median(v):.2f}  max {v.max():.2f}")
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+
+    agreement() if sys.argv[1:] == ["--agreement"] else main()
