@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import tifffile
 
-from annotate_view import load
+from annotate_view import load, stretch
 
 
 def norm8(a: np.ndarray, lo: float = 1, hi: float = 99) -> np.ndarray:
@@ -31,7 +31,7 @@ def norm8(a: np.ndarray, lo: float = 1, hi: float = 99) -> np.ndarray:
 def main() -> None:
     out, plant, panel = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
     u0, v0, u1, v1 = (int(x) for x in sys.argv[4:8]) if len(sys.argv) > 7 else (170, 110, 430, 350)
-    ir = norm8(np.log1p(load(plant, "ir")))[v0:v1, u0:u1]
+    ir = stretch("ir", load(plant, "ir")[v0:v1, u0:u1])[..., 0]  # log + CLAHE, as for annotation
     e_ir = cv2.Canny(cv2.GaussianBlur(ir, (3, 3), 0), 40, 100)
     rows = []
     for cam in ("hyperspectral", "thermal"):
