@@ -10,6 +10,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QFileDialog, QHBoxLayout, QHea
                                QMessageBox, QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout,
                                QWidget)
 
+from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
 STATUS_COLOURS = {"found": "#d4edda", "failed": "#f8d7da", "missing": "#e2e3e5", None: "#ffffff"}
@@ -58,13 +59,11 @@ class CaptureTable(QTableWidget):
             event.ignore()
 
 
-class CapturePage(QWidget):
+class CapturePage(WizardPage):
     title = "Capture list"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
         lay = QVBoxLayout(self)
         self.summary = QLabel()
         self.summary.setWordWrap(True)
@@ -82,7 +81,7 @@ class CapturePage(QWidget):
         self.detect_btn = QPushButton("Detect corners")
         self.add_btn.clicked.connect(self._add)
         self.remove_btn.clicked.connect(self._remove)
-        self.detect_btn.clicked.connect(lambda: self.wizard.run_detection(None))
+        self.detect_btn.clicked.connect(lambda: self.actions.run_detection(None))
         hint = QLabel("Drop pose folders here. Double-click an image to review its corners.")
         hint.setStyleSheet("color: #666666;")
         hb.addWidget(hint, 1)
@@ -93,7 +92,7 @@ class CapturePage(QWidget):
         self.model.session_changed.connect(self.rebuild)
         self.model.detection_changed.connect(self.update_cell)
         self.model.review_changed.connect(self._update_all)
-        wizard.busy_changed.connect(self._busy)
+        actions.busy_changed.connect(self._busy)
 
     def _busy(self, busy: bool) -> None:
         for b in (self.add_btn, self.remove_btn, self.detect_btn):
@@ -117,7 +116,7 @@ class CapturePage(QWidget):
             for j, c in enumerate(cams):
                 self._set_cell(i, j, (p.name, c))
         self._summary()
-        self._busy(self.wizard.is_busy())
+        self._busy(self.actions.is_busy())
 
     def _update_all(self) -> None:
         s = self.model.session
@@ -212,7 +211,7 @@ class CapturePage(QWidget):
         it = self.table.item(row, col)
         key = it.data(Qt.ItemDataRole.UserRole) if it else None
         if key:
-            self.wizard.show_view(key[1], key[0])
+            self.actions.show_view(key[1], key[0])
 
     def _add(self) -> None:
         d = QFileDialog.getExistingDirectory(self, "Add a pose (folder with one image per camera)")
@@ -226,7 +225,7 @@ class CapturePage(QWidget):
         if s is None:
             set_banner(self.message, "⚠ open or create a session first (page 1)", error=True)
             return []
-        if self.wizard.is_busy():
+        if self.actions.is_busy():
             set_banner(self.message, "⚠ wait until the running job finishes (or cancel it)", error=True)
             return []
         added, problems = [], []
@@ -240,7 +239,7 @@ class CapturePage(QWidget):
             set_banner(self.message, "⚠ " + "; ".join(problems), error=True)
         if added:
             keys = {(p, c) for p in added for c in s.pose(p).images}
-            self.wizard.run_detection(keys)
+            self.actions.run_detection(keys)
         return added
 
     def selected_poses(self) -> list[str]:
@@ -267,8 +266,5 @@ class CapturePage(QWidget):
                 s.remove_pose(p)
         except (PlantregError, OSError) as e:
             set_banner(self.message, f"⚠ {e}", error=True)
-        for k in [k for k in self.model.detections if k[0] in poses]:
-            self.model.detections.pop(k, None)
-            self.model.thumbnails.pop(k, None)
-        self.model.invalidate_calibration()
+        self.model.remove_poses(poses)
         self.rebuild()

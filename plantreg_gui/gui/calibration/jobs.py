@@ -11,6 +11,7 @@ import numpy as np
 
 from ...core.calibration import Detection, calibrate, calibrated_rig, detect_session, error_tables, write_report
 from ...core.imageio import read_image
+from ...core.process_job import run_in_process
 from ...core.progress import Reporter, ensure_reporter
 from .widgets import thumbnail
 
@@ -56,11 +57,14 @@ def _thumb(path) -> np.ndarray | None:
 
 
 def calibrate_job(session, detections: dict, excluded: set[Key], progress: Reporter | None = None):
-    return calibrate(session, detections, excluded, progress=progress)
+    """The calibration, in the worker process: its bundle adjustment loops in Python and would
+    hold the GIL against the GUI thread for seconds (see :mod:`~plantreg_gui.core.process_job`)."""
+    return run_in_process(calibrate, session, detections, excluded, progress=progress)
 
 
 def tables_job(session, calibration, detections: dict, excluded: set[Key], progress: Reporter | None = None):
-    return error_tables(session, calibration, detections, excluded, progress=progress)
+    """The error tables, in the worker process (meshing every depth map holds the GIL)."""
+    return run_in_process(error_tables, session, calibration, detections, excluded, progress=progress)
 
 
 def demo_job(folder: Path, progress: Reporter | None = None) -> Path:

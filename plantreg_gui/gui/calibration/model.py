@@ -21,6 +21,8 @@ class WizardModel(QObject):
     review_changed = Signal()
     calibration_changed = Signal()
     report_changed = Signal()
+    saved_changed = Signal()
+    view_selected = Signal(object)  # Key: show this image in the corner review
 
     def __init__(self, parent: QObject | None = None) -> None:
         super().__init__(parent)
@@ -131,7 +133,31 @@ class WizardModel(QObject):
         except OSError:
             pass  # a read-only session still works; the choices just do not persist
 
+    def select_view(self, key: Key) -> None:
+        """Ask the corner review to show image ``key`` = (pose, camera)."""
+        self.view_selected.emit(tuple(key))
+
     # ------------------------------------------------------------------ results
+    def clear_detections(self) -> None:
+        """Forget every detection (before detecting all images again)."""
+        self.detections.clear()
+        self.thumbnails.clear()
+        self.invalidate_calibration()
+        self.detection_changed.emit(None)
+
+    def remove_poses(self, poses) -> None:
+        """Forget the detections of removed poses."""
+        poses = set(poses)
+        for k in [k for k in self.detections if k[0] in poses]:
+            self.detections.pop(k, None)
+            self.thumbnails.pop(k, None)
+        self.invalidate_calibration()
+        self.detection_changed.emit(None)
+
+    def set_saved_paths(self, paths: dict[str, str]) -> None:
+        self.saved_paths = dict(paths)
+        self.saved_changed.emit()
+
     def put_detection(self, det, thumb: np.ndarray | None) -> None:
         key = (det.pose, det.camera)
         self.detections[key] = det

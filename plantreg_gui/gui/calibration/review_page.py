@@ -12,6 +12,7 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QFormLayout, QGroupBox, QHB
                                QListWidget, QListWidgetItem, QPushButton, QSizePolicy, QSplitter,
                                QVBoxLayout, QWidget)
 
+from .page import WizardPage
 from .image_view import ImageView
 from .widgets import banner, qpixmap, set_banner, to_display
 
@@ -67,13 +68,11 @@ def empty_regions(acc: np.ndarray) -> list[str]:
     return out
 
 
-class ReviewPage(QWidget):
+class ReviewPage(WizardPage):
     title = "Corner review"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
         self.current: tuple[str, str] | None = None
         self._cache: OrderedDict = OrderedDict()
         lay = QHBoxLayout(self)
@@ -178,7 +177,8 @@ class ReviewPage(QWidget):
         self.model.detection_changed.connect(self._detection)
         self.model.review_changed.connect(self._review)
         self.model.calibration_changed.connect(self._relabel)
-        wizard.busy_changed.connect(self._busy)
+        self.model.view_selected.connect(lambda key: self.select(key[1], key[0]))
+        actions.busy_changed.connect(self._busy)
 
     def _busy(self, busy: bool) -> None:
         self.redetect_btn.setEnabled(not busy and self.current is not None)
@@ -349,7 +349,7 @@ class ReviewPage(QWidget):
         inv = getattr(opts, "invert", None)
         self.polarity.setCurrentIndex(0 if inv is None else (2 if inv else 1))
         self.enhance.setChecked(bool(getattr(opts, "enhance", False)))
-        self.redetect_btn.setEnabled(not self.wizard.is_busy() and key[1] in self.model.session.pose(key[0]).images)
+        self.redetect_btn.setEnabled(not self.actions.is_busy() and key[1] in self.model.session.pose(key[0]).images)
         if d is not None and d.status == "failed":
             set_banner(self.info, f"Detection failed: {d.reason}. For a thermal image try the inverted polarity "
                                   "and contrast enhancement, then Re-detect.")
@@ -374,7 +374,7 @@ class ReviewPage(QWidget):
         return DetectOptions(invert=inv, enhance=self.enhance.isChecked(), detector=self.model.detector())
 
     def _detector_chosen(self, _index: int) -> None:
-        self.wizard.set_detector(self.detector.currentData())
+        self.actions.set_detector(self.detector.currentData())
         # refused while busy or without a session: show what is in use
         self.detector.blockSignals(True)
         self.detector.setCurrentIndex(max(0, self.detector.findData(self.model.detector())))
@@ -382,7 +382,7 @@ class ReviewPage(QWidget):
 
     def _redetect(self) -> None:
         if self.current is not None:
-            self.wizard.redetect(self.current, self.current_options())
+            self.actions.redetect(self.current, self.current_options())
 
     # ------------------------------------------------------------------ coverage
     def _update_coverage(self) -> None:

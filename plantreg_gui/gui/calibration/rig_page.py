@@ -11,6 +11,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDoubleSpinBox, QFi
                                QGroupBox, QHBoxLayout, QHeaderView, QLabel, QLineEdit, QPushButton,
                                QSizePolicy, QSpinBox, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget)
 
+from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
 MODALITIES = ["infrared", "visible", "thermal", "hyperspectral", "multispectral", "depth"]
@@ -18,13 +19,11 @@ DICTIONARIES = ["DICT_4X4_50", "DICT_4X4_100", "DICT_4X4_250", "DICT_5X5_100", "
                 "DICT_6X6_250", "DICT_7X7_250", "DICT_ARUCO_ORIGINAL"]
 
 
-class RigPage(QWidget):
+class RigPage(WizardPage):
     title = "Rig and board"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
         self._loading = False
         outer = QVBoxLayout(self)
 
@@ -368,7 +367,7 @@ class RigPage(QWidget):
     def _open(self) -> None:
         d = QFileDialog.getExistingDirectory(self, "Open capture session (folder with session.json)")
         if d:
-            self.wizard.open_session(Path(d))
+            self.actions.open_session(Path(d))
 
     def _create(self) -> None:
         d = QFileDialog.getExistingDirectory(self, "Folder for the new capture session")
@@ -388,11 +387,20 @@ class RigPage(QWidget):
         except (PlantregError, OSError) as e:
             set_banner(self.message, f"⚠ {e}", error=True)
             return False
-        self.wizard.set_session(s)
+        self.actions.set_session(s)
         return True
 
     def _apply(self) -> None:
         self.apply_changes()
+
+    def leave(self) -> bool:
+        """Going on needs a session; edits not yet applied are applied first."""
+        if self.model.session is None:
+            set_banner(self.message, "⚠ Open a capture session (or create one) before going on.", error=True)
+            return False
+        if self.apply_btn.isEnabled():
+            self.apply_changes()
+        return True
 
     def apply_changes(self) -> bool:
         from ...core.errors import PlantregError
@@ -408,5 +416,5 @@ class RigPage(QWidget):
         except (PlantregError, OSError) as e:
             set_banner(self.message, f"⚠ cannot save the session: {e}", error=True)
             return False
-        self.wizard.set_session(s)
+        self.actions.set_session(s)
         return True

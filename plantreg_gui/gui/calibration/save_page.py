@@ -11,18 +11,17 @@ from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QFileDialog, QFormLayo
                                QGroupBox, QHBoxLayout, QLabel, QLineEdit, QMessageBox, QPushButton,
                                QSizePolicy, QVBoxLayout, QWidget)
 
+from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
 AXES = ("x", "y", "z")
 
 
-class SavePage(QWidget):
+class SavePage(WizardPage):
     title = "Save"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
         self._rays = None  # (cal id, rays (H*W, 3) z=1 in the depth camera frame)
         self._depth_cache: dict[str, np.ndarray] = {}
         self.inside_fraction = float("nan")
@@ -116,7 +115,8 @@ class SavePage(QWidget):
         self.model.session_changed.connect(self._session)
         self.model.calibration_changed.connect(self._calibration)
         self.model.report_changed.connect(self._summary)
-        wizard.busy_changed.connect(lambda b: self._buttons())
+        self.model.saved_changed.connect(lambda: self.saved(self.model.saved_paths))
+        actions.busy_changed.connect(lambda b: self._buttons())
 
     # ------------------------------------------------------------------ state
     def _session(self) -> None:
@@ -166,7 +166,7 @@ class SavePage(QWidget):
     def _buttons(self) -> None:
         lo, hi = self.roi()
         ok_roi = bool(np.all(lo < hi))
-        self.save_btn.setEnabled(not self.wizard.is_busy() and self.model.calibration_ready() and ok_roi)
+        self.save_btn.setEnabled(not self.actions.is_busy() and self.model.calibration_ready() and ok_roi)
         self.fit_btn.setEnabled(self.pose.count() > 0 and self.model.calibration is not None)
 
     def _summary(self) -> None:
@@ -234,6 +234,8 @@ class SavePage(QWidget):
         return X, d
 
     def _draw(self) -> None:
+        if not self.isVisible():
+            return  # drawn when shown (showEvent)
         lo, hi = self.roi()
         if not np.all(lo < hi):
             set_banner(self.roi_msg, "⚠ ROI min must be below max in x, y and z", error=True)
@@ -372,7 +374,7 @@ class SavePage(QWidget):
                 set_banner(self.message, "Not saved: choose other file names, or save again and confirm.")
                 return
             self._confirmed.update(str(p) for p in existing)
-        self.wizard.save_outputs(rig_path, rep_path, lo, hi)
+        self.actions.save_outputs(rig_path, rep_path, lo, hi)
 
     def saved(self, paths: dict[str, str]) -> None:
         set_banner(self.message, "Saved " + ", ".join(paths.values()))

@@ -15,7 +15,7 @@ from typing import Any, Callable
 import numpy as np
 from PySide6.QtCore import QObject, QStandardPaths, Signal, Slot
 from PySide6.QtWidgets import (QHBoxLayout, QLabel, QListWidget, QListWidgetItem, QProgressBar,
-                               QPushButton, QStackedWidget, QVBoxLayout, QWidget)
+                               QPushButton, QSizePolicy, QStackedWidget, QVBoxLayout, QWidget)
 
 from ..workers import Worker, show_error
 from . import jobs
@@ -72,8 +72,9 @@ class CalibrationWizard(QWidget):
         self.stack = QStackedWidget()
         right.addWidget(self.stack, 1)
 
-        self.pages = [RigPage(self), CapturePage(self), ReviewPage(self), IntrinsicsPage(self),
-                      ExtrinsicsPage(self), DepthPage(self), SavePage(self)]
+        # pages see the model and this wizard only through the WizardActions interface (page.py)
+        self.pages = [cls(self.model, self) for cls in (RigPage, CapturePage, ReviewPage, IntrinsicsPage,
+                                                         ExtrinsicsPage, DepthPage, SavePage)]
         for i, p in enumerate(self.pages):
             self.stack.addWidget(p)
             QListWidgetItem(f"{i + 1}  {p.title}", self.steps)
@@ -82,6 +83,8 @@ class CalibrationWizard(QWidget):
         bar = QHBoxLayout()
         self.status = QLabel("")
         self.status.setMinimumWidth(260)
+        # progress text must not change the layout: a relayout repaints (and re-renders) every page
+        self.status.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         self.progress = QProgressBar()
         self.progress.setRange(0, 1000)
         self.progress.setTextVisible(True)
@@ -137,6 +140,9 @@ class CalibrationWizard(QWidget):
         self.model.set_session(session)
         self._update_nav()
         if session.poses:
+            from ...core.process_job import warm_up
+
+            warm_up()  # the calibration's process starts importing while corners are detected
             self._ensure(("detect",))
 
     def go_to_page(self, n: int) -> None:
@@ -178,15 +184,8 @@ class CalibrationWizard(QWidget):
 
     # ------------------------------------------------------------------ navigation
     def _next(self) -> None:
-        if self.page == 1:
-            rp: RigPage = self.pages[0]
-            if self.model.session is None:
-                from .widgets import set_banner
-
-                set_banner(rp.message, "⚠ Open a capture session (or create one) before going on.", error=True)
-                return
-            if rp.apply_btn.isEnabled():
-                rp.apply_changes()
+        if not self.pages[self.page - 1].leave():
+            return
         self.go_to_page(self.page + 1)
 
     def _update_nav(self) -> None:
@@ -196,7 +195,7 @@ class CalibrationWizard(QWidget):
     def show_view(self, camera: str, pose: str) -> None:
         """Open one image in the corner review (page 3)."""
         self.go_to_page(3)
-        self.pages[2].select(camera, pose)
+        self.model.select_view((pose, camera))
 
     # ------------------------------------------------------------------ actions the pages ask for
     def run_detection(self, keys: set | None = None) -> None:
@@ -204,10 +203,7 @@ class CalibrationWizard(QWidget):
         if self.model.session is None or self.is_busy():
             return
         if keys is None:
-            self.model.detections.clear()
-            self.model.thumbnails.clear()
-            self.model.invalidate_calibration()
-            self.model.detection_changed.emit(None)
+            self.model.clear_detections()
         self._start_detection(keys, self.model.options())
 
     def redetect(self, key, options) -> None:
@@ -230,10 +226,7 @@ class CalibrationWizard(QWidget):
         if self.model.session is None:
             return
         self.model.invalidate_calibration()
-        steps = ["detect", "calibrate"] + (["tables"] if self.page >= 5 else [])
-        if self.model.calibration is not None:
-            self.model.calibration_stale = True
-        self._ensure(steps)
+        self._ensure(["detect", "calibrate"] + (["tables"] if self.page >= 5 else []))
 
     def save_outputs(self, rig_path: Path, report_path: Path | None, roi_min: np.ndarray, roi_max: np.ndarray) -> None:
         """Write the rig file and the report (+ CSV tables) on a worker."""
@@ -362,8 +355,7 @@ class CalibrationWizard(QWidget):
         self._run_next()
 
     def _on_saved(self, paths: dict) -> None:
-        self.model.saved_paths = dict(paths)
-        self.pages[6].saved(paths)
+        self.model.set_saved_paths(paths)
         self.saved.emit(dict(paths))
 
     def _set_busy(self, busy: bool) -> None:
