@@ -139,7 +139,12 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
             assert abs(K[0, 0] / cam.K[0, 0] - 1) < 0.01, cam.name
             assert abs(K[1, 1] / cam.K[1, 1] - 1) < 0.01, cam.name
         assert set(ip.chart.bars) == set(truth.names)
-        assert rejected[0] not in ip.chart.bars["rgb"]  # excluded views are not calibrated
+        assert rejected[0] not in ip.chart.bars["rgb"]  # excluded views are not calibrated ...
+        # ... but stay on the chart, marked, with their error under the final model (sub-pixel on
+        # the rendered demo: it was a good view)
+        assert 0 < ip.chart.excluded_bars["rgb"][rejected[0]] < 1.0
+        assert "⊘" in rv.list.currentItem().text() or any(
+            "⊘" in rv.list.item(i).text() for i in range(rv.list.count()))
         assert all(math.isfinite(v) and v >= 0 for bars in ip.chart.bars.values() for v in bars.values())
         pose = ip.chart.tallest("ir")
         qtbot.mouseClick(ip.chart, Qt.MouseButton.LeftButton, pos=ip.chart.bar_center("ir", pose).toPoint())

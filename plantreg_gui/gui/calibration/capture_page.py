@@ -148,12 +148,14 @@ class CapturePage(WizardPage):
         if status is None and key[1] not in pose.images:
             status = "missing"
         text = STATUS_TEXT.get(status, str(status))
+        if excluded and status == "found":
+            text = "⊘ rejected"  # found but excluded: no green tick
         if status == "found" and det.corners is not None:
             text += f" ({len(det.corners)})"
         elif status == "failed" and det.reason:
             r = det.reason.split(" (")[0]
             text += "\n" + (r if len(r) <= 44 else r[:42] + "…")
-        if excluded:
+        if excluded and status != "found":
             text += "\nexcluded"
         it = QTableWidgetItem(text)
         tip = [f"{key[0]} / {key[1]}"]

@@ -32,7 +32,8 @@ class IntrinsicsPage(WizardPage):
         self.worst.setWordWrap(True)
         lay.addWidget(self.worst)
         hint = QLabel("Each bar is one view's mean reprojection error; orange bars are the views the "
-                      "calibration flags as weak, the dashed line is the camera's mean. Click a bar to "
+                      "calibration flags as weak, hatched grey bars marked ✖ the views you excluded (their error "
+                      "with the final model), the dashed line is the camera's mean. Click a bar to "
                       "inspect that view (page 3) and reject it there.")
         hint.setWordWrap(True)
         hint.setStyleSheet("color: #444444;")
@@ -48,6 +49,7 @@ class IntrinsicsPage(WizardPage):
         lay.addLayout(hb)
         self.model.calibration_changed.connect(self.refresh_later)
         self.model.report_changed.connect(self.refresh_later)
+        self.model.review_changed.connect(self.refresh_later)
         actions.busy_changed.connect(self._on_busy)
 
     def _on_busy(self, busy) -> None:
@@ -116,7 +118,9 @@ class IntrinsicsPage(WizardPage):
         per_view = results.per_view_px(cal)
         weak = results.weak_by_camera(cal)
         mean = {r["camera"]: r["px"] for r in rows}
-        self.chart.set_data(per_view, weak, mean)
+        ex = results.excluded_px(cal, self.model.excluded, self.model.detections)
+        per_view = {c: {p: v for p, v in pv.items() if p not in ex.get(c, {})} for c, pv in per_view.items()}
+        self.chart.set_data(per_view, weak, mean, excluded=ex)
         # mrcal-style: the worst views first, across cameras (on the normalised error)
         norm = {n: float(c.normalization) for n, c in cal.intrinsics.items()}
         worst = sorted(((px * norm[c], c, p, px) for c, v in per_view.items() for p, px in v.items()), reverse=True)[:6]

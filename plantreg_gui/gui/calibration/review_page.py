@@ -17,6 +17,7 @@ from .image_view import ImageView
 from .widgets import banner, qpixmap, set_banner, to_display
 
 STATUS_MARK = {"found": "✔", "failed": "✖", "missing": "—", None: "…"}
+REJECTED_MARK = "⊘"
 
 
 def coverage_map(detections, camera: str, excluded: set, max_side: int = 240) -> tuple[np.ndarray, tuple[int, int]] | None:
@@ -232,7 +233,8 @@ class ReviewPage(WizardPage):
         st = getattr(d, "status", None)
         ex = key in self.model.excluded
         weak = self._weak.get(key)
-        it.setText(f"{STATUS_MARK.get(st, '?')} {key[0]} · {key[1]}" + ("  (rejected)" if ex else "")
+        mark = REJECTED_MARK if ex else STATUS_MARK.get(st, "?")  # a rejected view never shows a green tick
+        it.setText(f"{mark} {key[0]} · {key[1]}" + ("  (rejected)" if ex else "")
                    + (f"  (weak {weak:.2f} px)" if weak is not None and not ex else ""))
         col = {"found": "#1e7e34", "failed": "#b02a37", "missing": "#6c757d"}.get(st, "#000000")
         it.setForeground(QColor("#999999" if ex else ("#c65d00" if weak is not None else col)))
