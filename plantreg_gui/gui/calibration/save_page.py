@@ -15,6 +15,7 @@ from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
 AXES = ("x", "y", "z")
+PREVIEW_SIDE = 400  # pixels: the depth preview's longer side
 
 
 class SavePage(WizardPage):
@@ -216,7 +217,8 @@ class SavePage(WizardPage):
         return d
 
     def points(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """Rig-frame points (H, W, 3) of the selected pose's depth map and the depth (H, W)."""
+        """Rig-frame points (h, w, 3) of the selected depth map and its depth (h, w), on a grid of
+        every ``step``-th pixel (see PREVIEW_SIDE)."""
         cal, s = self.model.calibration, self.model.session
         pose = self.pose.currentText()
         if cal is None or s is None or not pose or cal.rig.depth_camera is None:
@@ -227,10 +229,16 @@ class SavePage(WizardPage):
         cam = cal.rig.depth()
         if d.shape != (cam.height, cam.width):
             return None
-        if self._rays is None or self._rays[0] is not cal:
-            self._rays = (cal, cam.rays_cam())  # (H*W, 3) z = 1, through the lens distortion
-        X_cam = self._rays[1] * d.reshape(-1, 1)  # depth maps hold z along the optical axis
-        X = cam.to_rig(X_cam).reshape(cam.height, cam.width, 3)
+        # a preview grid of at most ~PREVIEW_SIDE pixels a side: undistorting every pixel of the
+        # depth camera on the GUI thread took longer than a frame
+        step = max(1, int(np.ceil(max(cam.width, cam.height) / PREVIEW_SIDE)))
+        if self._rays is None or self._rays[0] is not cal or self._rays[1] != step:
+            v, u = np.mgrid[0:cam.height:step, 0:cam.width:step]
+            self._rays = (cal, step, u.shape, cam.rays_cam(np.c_[u.ravel(), v.ravel()].astype(np.float64)))
+        shape = self._rays[2]
+        d = np.ascontiguousarray(d[::step, ::step])
+        X_cam = self._rays[3] * d.reshape(-1, 1)  # depth maps hold z along the optical axis
+        X = cam.to_rig(X_cam).reshape(shape[0], shape[1], 3)
         return X, d
 
     def _draw(self) -> None:
@@ -273,13 +281,13 @@ class SavePage(WizardPage):
         img = np.clip(rgb, 0, 255).astype(np.uint8)
         self.inside_fraction = float(inside.sum() / max(finite.sum(), 1))
         pm = qpixmap(img)
-        self._overlay_roi(pm, lo, hi)
+        self._overlay_roi(pm, lo, hi, self._rays[1])
         sz = self.image.size()
         self.image.setPixmap(pm.scaled(max(sz.width() - 4, 50), max(sz.height() - 4, 50),
                                        Qt.AspectRatioMode.KeepAspectRatio, Qt.TransformationMode.SmoothTransformation))
         self.image.setToolTip(f"{100 * self.inside_fraction:.0f} % of the measured pixels inside the ROI")
 
-    def _overlay_roi(self, pm, lo: np.ndarray, hi: np.ndarray) -> None:
+    def _overlay_roi(self, pm, lo: np.ndarray, hi: np.ndarray, step: int = 1) -> None:
         """Draw the ROI box (yellow) and a 10 cm grid on its ground face z = max z (cyan), projected
         through the calibrated depth camera, so they show even where the depth map is empty."""
         from PySide6.QtCore import QPointF
@@ -288,6 +296,7 @@ class SavePage(WizardPage):
         cam = self.model.calibration.rig.depth()
         p = QPainter(pm)
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
+        p.scale(1.0 / step, 1.0 / step)  # projected pixels are full-resolution; the preview every step-th
 
         def polyline(a, b, pen) -> None:
             X = np.linspace(a, b, 60)
@@ -299,15 +308,18 @@ class SavePage(WizardPage):
                     p.drawLine(QPointF(*uv[i]), QPointF(*uv[i + 1]))
 
         grid = QPen(QColor(0, 220, 220, 170), 1.0)
+        grid.setCosmetic(True)
         step = 0.1
         for x in np.arange(np.ceil(lo[0] / step) * step, hi[0] + 1e-9, step):
             polyline([x, lo[1], hi[2]], [x, hi[1], hi[2]], grid)
         for y in np.arange(np.ceil(lo[1] / step) * step, hi[1] + 1e-9, step):
             polyline([lo[0], y, hi[2]], [hi[0], y, hi[2]], grid)
         box = QPen(QColor(255, 220, 0, 230), 2.0)
+        box.setCosmetic(True)
         c = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])])
         for i, j in ((0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)):
             polyline(c[i], c[j], box)
+        p.resetTransform()
         p.setPen(QColor(0, 230, 230))
         f = p.font()
         f.setPixelSize(max(12, pm.height() // 40))

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-from PySide6.QtCore import QObject, QStandardPaths, Signal, Slot
+from PySide6.QtCore import QObject, QStandardPaths, QTimer, Signal, Slot
 from PySide6.QtWidgets import (QHBoxLayout, QLabel, QListWidget, QListWidgetItem, QProgressBar,
                                QPushButton, QSizePolicy, QStackedWidget, QVBoxLayout, QWidget)
 
@@ -33,6 +33,8 @@ from .save_page import SavePage
 NEEDS = {1: (), 2: ("detect",), 3: ("detect",), 4: ("detect", "calibrate"),
          5: ("detect", "calibrate", "tables"), 6: ("detect", "calibrate", "tables"),
          7: ("detect", "calibrate", "tables")}
+
+PROGRESS_HZ = 5
 
 
 class _Relay(QObject):
@@ -58,6 +60,10 @@ class CalibrationWizard(QWidget):
         self._job_session = None
         self._on_result: Callable[[Any], None] | None = None
         self._demo_folder: Path | None = None
+        self._pending_progress: tuple[float, str] | None = None
+        self._progress_timer = QTimer(self)
+        self._progress_timer.setInterval(1000 // PROGRESS_HZ)
+        self._progress_timer.timeout.connect(self._show_progress)
         self.last_error: str | None = None
 
         root = QHBoxLayout(self)
@@ -320,12 +326,24 @@ class CalibrationWizard(QWidget):
 
     @Slot(float, str)
     def _on_progress(self, f: float, msg: str) -> None:
+        # at most PROGRESS_HZ repaints: every repaint of the window also re-renders the 3D view
+        self._pending_progress = (f, msg)
+        if not self._progress_timer.isActive():
+            self._show_progress()
+            self._progress_timer.start()
+
+    def _show_progress(self) -> None:
+        if self._pending_progress is None:
+            return
+        f, msg = self._pending_progress
+        self._pending_progress = None
         self.progress.setValue(int(1000 * f))
         self.progress.setFormat(f"{100 * f:.0f} %")
         self.status.setText(f"{self._job_name}: {msg}" if msg else self._job_name)
 
     @Slot(object)
     def _on_finished(self, result) -> None:
+        self._pending_progress = None
         self.status.setText(f"{self._job_name}: done")
         self.progress.setValue(1000)
         cb = self._on_result
