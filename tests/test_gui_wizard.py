@@ -69,7 +69,7 @@ def test_demo_session_first_page_to_saved_rig(qtbot, demo_dir, tmp_path):
 def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
     from plantreg_gui.core.calibration import Session
     from plantreg_gui.core.rig import Rig
-    from plantreg_gui.core.synthetic import demo_rig
+    from plantreg_gui.core.synthetic import GROUND_Z, demo_rig
 
     truth = demo_rig()
     folder = tmp_path / "session"
@@ -174,6 +174,22 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
         qtbot.mouseClick(w.next_btn, Qt.MouseButton.LeftButton)
         _idle(qtbot, w)
         sp = w.pages[6]
+        # the ROI comes from a plant, not from a board pose (defect 1): a board pose cannot set it
+        assert sp.source()[0] == "pose" and not sp.fit_btn.isEnabled() and not sp.fit_roi()
+        assert "Load plant depth map" in sp.roi_msg.text()
+        plant = calibration_session.parent / "recording"
+        assert sp.load_plant_depth(plant / "recording.json")
+        assert sp.source() == ("plant", str(plant / "depth.png")) and sp.fit_btn.isEnabled()
+        lo, hi = sp.roi()
+        assert GROUND_Z - 0.06 < hi[2] < GROUND_Z  # the ground plane just in front of the true ground
+        qtbot.waitUntil(lambda: getattr(sp, "preview_rgb", None) is not None, timeout=5000)
+        # page 7's colours (defect 8): red marks only the outside of the ROI, never depth inside it
+        sp.set_roi([-0.4, -0.35, 0.3], [0.4, 0.35, 0.56])  # a box around a board: cuts the plant
+        qtbot.waitUntil(lambda: "leaves out" in sp.roi_msg.text(), timeout=5000)
+        rgb = sp.preview_rgb.astype(int)
+        red = (rgb[:, :, 0] > rgb[:, :, 1] + 60) & (rgb[:, :, 0] > rgb[:, :, 2] + 60)
+        assert red.any() and not (red & sp.preview_inside).any()
+        assert not (red & ~sp.preview_outside).any()
         sp.set_roi([-0.4, -0.35, 0.3], [0.4, 0.35, 1.15])
         qtbot.waitUntil(lambda: 0.0 < sp.inside_fraction <= 1.0, timeout=5000)
         out = tmp_path / "out"

@@ -32,6 +32,7 @@ from .progress import CancelToken, Reporter, ensure_reporter
 CANCEL_GRACE_S = 3.0
 
 _lock = threading.Lock()  # one job at a time in the one child; others wait (cancellably)
+_state_lock = threading.Lock()  # creating / killing the pool (held briefly: the GUI thread takes it)
 _state: dict[str, Any] = {}  # "pool", "queue", "cancel"
 _ids = itertools.count(1)
 
@@ -61,6 +62,11 @@ def _noop(progress: Reporter | None = None) -> None:
 
 # --- in the parent
 def _pool() -> tuple[cf.ProcessPoolExecutor, Any, Any]:
+    with _state_lock:
+        return _pool_locked()
+
+
+def _pool_locked() -> tuple[cf.ProcessPoolExecutor, Any, Any]:
     if "pool" not in _state:
         ctx = mp.get_context("spawn")
         q, ev = ctx.Queue(), ctx.Event()
@@ -71,9 +77,10 @@ def _pool() -> tuple[cf.ProcessPoolExecutor, Any, Any]:
 
 
 def _kill_pool() -> None:
-    pool = _state.pop("pool", None)
-    _state.pop("queue", None)
-    _state.pop("cancel", None)
+    with _state_lock:
+        pool = _state.pop("pool", None)
+        _state.pop("queue", None)
+        _state.pop("cancel", None)
     if pool is None:
         return
     for p in list(getattr(pool, "_processes", {}).values()):  # no public terminate()
@@ -83,9 +90,8 @@ def _kill_pool() -> None:
 
 def warm_up() -> None:
     """Start the child process now (it imports NumPy, OpenCV, SciPy: about a second) so that the
-    first job does not wait for it. Returns at once."""
-    with _lock:
-        _pool()[0].submit(_noop)
+    first job does not wait for it. Returns at once (never waits for a running job)."""
+    _pool()[0].submit(_noop)
 
 
 def run_in_process(fn: Callable[..., Any], *args: Any, progress: Reporter | None = None, **kwargs: Any) -> Any:
