@@ -45,6 +45,11 @@ class DepthPage(WizardPage):
         g3l.addLayout(hb)
         self.views = make_table(stretch=True)
         g3l.addWidget(self.views)
+        # the cells show both numbers the colour is about (defect 9: px shown, normalised coloured)
+        self.views_legend = grade_legend("Rows: poses, worst first; columns: target cameras. Cells: mean depth "
+                                         "error in pixels of the target and normalised (× 1000/√(h·w) of the "
+                                         "target), as in the table on the left.")
+        g3l.addWidget(self.views_legend)
         split.addWidget(g3)
         split.setSizes([760, 560])
         lay.addWidget(split, 1)
@@ -97,7 +102,12 @@ class DepthPage(WizardPage):
         for i, (_worst, pose, cells) in enumerate(rows):
             self.views.setItem(i, 0, item(pose, bold=True))
             for j, c in enumerate(cells):
-                it = item(fmt(c.get("px") if c else None),
-                          bg=grade_colour(c.get("normalized", float("nan"))) if c else None)
+                if c and c.get("px") is not None:
+                    nn = c.get("normalized", float("nan"))
+                    it = item(f"{fmt(c['px'], 3)} px\n{fmt(nn, 3)} norm.", bg=grade_colour(nn),
+                              tooltip=f"{pose}: {o} → {pairs[j][1]}: {c['px']:.4f} px of {pairs[j][1]}, "
+                                      f"{nn:.4f} normalised (colour)")
+                else:
+                    it = item("—")
                 self.views.setItem(i, j + 1, it)
         self.views.resizeRowsToContents()

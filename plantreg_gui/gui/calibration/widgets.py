@@ -129,10 +129,13 @@ def fill_matrix(table: QTableWidget, names: list[str], cell: dict, what: str) ->
     table.setFont(f)
 
 
-def grade_legend() -> QLabel:
+MATRIX_LEGEND = ("Rows: origin camera, columns: target camera. Cells: mean error in pixels of the target and "
+                 "normalised (× 1000/√(h·w) of the target).")
+
+
+def grade_legend(intro: str = MATRIX_LEGEND) -> QLabel:
     lab = QLabel(
-        f"Rows: origin camera, columns: target camera. Cells: mean error in pixels of the target and "
-        f"normalised (× 1000/√(h·w) of the target). Colour on the normalised error: "
+        f"{intro} Colour on the normalised error: "
         f"<span style='background:{grade_colour(0).name()}'>&nbsp;good&nbsp;</span> "
         f"<span style='background:{grade_colour(GRADE_MID).name()}'>&nbsp;{GRADE_MID:g}&nbsp;</span> "
         f"<span style='background:{grade_colour(GRADE_MAX).name()}'>&nbsp;≥ {GRADE_MAX:g}&nbsp;</span>"

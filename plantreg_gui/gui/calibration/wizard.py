@@ -30,6 +30,7 @@ from .rig_page import RigPage
 from .save_page import SavePage
 
 #: What each page needs computed before it can show its content.
+STEPS = ("detect", "calibrate", "tables")
 NEEDS = {1: (), 2: ("detect",), 3: ("detect",), 4: ("detect", "calibrate"),
          5: ("detect", "calibrate", "tables"), 6: ("detect", "calibrate", "tables"),
          7: ("detect", "calibrate", "tables")}
@@ -58,6 +59,7 @@ class CalibrationWizard(QWidget):
         self._relay = _Relay(self)
         self._relay.detection.connect(self._on_detection)
         self._job_session = None
+        self._job_step = ""  # the running step of STEPS, or another job's title
         self._on_result: Callable[[Any], None] | None = None
         self._demo_folder: Path | None = None
         self._pending_progress: tuple[float, str] | None = None
@@ -170,6 +172,13 @@ class CalibrationWizard(QWidget):
 
     def is_busy(self) -> bool:
         return (self._worker is not None) or bool(self._queue)
+
+    def page_busy(self) -> bool:
+        """Busy with work the current page needs (see NEEDS): detection running in the background
+        does not make page 1 busy; writing the demo or saving always does."""
+        needs = set(NEEDS[self.page])
+        running = self._worker is not None and (self._job_step in needs or self._job_step not in STEPS)
+        return running or any(s in needs for s in self._queue)
 
     def shutdown(self) -> None:
         """Cancel and wait for all work; close the 3D view (safe to call twice)."""
@@ -308,6 +317,8 @@ class CalibrationWizard(QWidget):
         w = Worker(fn, *args, parent=self)
         self._worker = w
         self._job_name = title
+        self._job_step = {"Detecting corners": "detect", "Calibrating": "calibrate",
+                          "Computing error tables": "tables"}.get(title, title)
         self._on_result = on_result
         w.progress.connect(self._on_progress)
         w.finished.connect(self._on_finished)
