@@ -7,8 +7,7 @@ from pathlib import Path
 from PySide6.QtCore import QSize, Qt
 from PySide6.QtGui import QColor, QIcon
 from PySide6.QtWidgets import (QAbstractItemView, QFileDialog, QHBoxLayout, QHeaderView, QLabel,
-                               QMessageBox, QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout,
-                               QWidget)
+                               QMessageBox, QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout)
 
 from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
@@ -90,6 +89,7 @@ class CapturePage(WizardPage):
         hb.addWidget(self.detect_btn)
         lay.addLayout(hb)
         self.model.session_changed.connect(self.rebuild)
+        self.model.poses_changed.connect(self.rebuild)
         self.model.detection_changed.connect(self.update_cell)
         self.model.review_changed.connect(self._update_all)
         actions.busy_changed.connect(self._busy)
@@ -221,8 +221,6 @@ class CapturePage(WizardPage):
             self.add_folders([Path(d)])
 
     def add_folders(self, dirs: list[Path]) -> list[str]:
-        from ...core.errors import PlantregError
-
         s = self.model.session
         if s is None:
             set_banner(self.message, "⚠ open or create a session first (page 1)", error=True)
@@ -230,13 +228,7 @@ class CapturePage(WizardPage):
         if self.actions.is_busy():
             set_banner(self.message, "⚠ wait until the running job finishes (or cancel it)", error=True)
             return []
-        added, problems = [], []
-        for d in dirs:
-            try:
-                added.append(s.add_pose_from_folder(d).name)
-            except (PlantregError, OSError) as e:
-                problems.append(str(e))
-        self.rebuild()
+        added, problems = self.model.add_pose_folders(dirs)
         if problems:
             set_banner(self.message, "⚠ " + "; ".join(problems), error=True)
         if added:
@@ -260,13 +252,6 @@ class CapturePage(WizardPage):
             self.remove_poses(poses)
 
     def remove_poses(self, poses: list[str]) -> None:
-        from ...core.errors import PlantregError
-
-        s = self.model.session
-        try:
-            for p in poses:
-                s.remove_pose(p)
-        except (PlantregError, OSError) as e:
-            set_banner(self.message, f"⚠ {e}", error=True)
-        self.model.remove_poses(poses)
-        self.rebuild()
+        problems = self.model.remove_poses(poses)
+        if problems:
+            set_banner(self.message, "⚠ " + "; ".join(problems), error=True)

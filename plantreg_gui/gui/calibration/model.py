@@ -22,6 +22,7 @@ class WizardModel(QObject):
     calibration_changed = Signal()
     report_changed = Signal()
     saved_changed = Signal()
+    poses_changed = Signal()  # pose folders added to or removed from the session
     view_selected = Signal(object)  # Key: show this image in the corner review
 
     def __init__(self, parent: QObject | None = None) -> None:
@@ -145,14 +146,39 @@ class WizardModel(QObject):
         self.invalidate_calibration()
         self.detection_changed.emit(None)
 
-    def remove_poses(self, poses) -> None:
-        """Forget the detections of removed poses."""
+    def add_pose_folders(self, dirs) -> tuple[list[str], list[str]]:
+        """Copy pose folders into the session; returns (added pose names, problems)."""
+        from ...core.errors import PlantregError
+
+        added, problems = [], []
+        for d in dirs:
+            try:
+                added.append(self.session.add_pose_from_folder(d).name)
+            except (PlantregError, OSError) as e:
+                problems.append(str(e))
+        if added:
+            self.invalidate_calibration()
+            self.poses_changed.emit()
+        return added, problems
+
+    def remove_poses(self, poses) -> list[str]:
+        """Delete pose folders from the session and forget their detections; returns problems."""
+        from ...core.errors import PlantregError
+
+        problems = []
         poses = set(poses)
+        for p in sorted(poses):
+            try:
+                self.session.remove_pose(p)
+            except (PlantregError, OSError) as e:
+                problems.append(str(e))
         for k in [k for k in self.detections if k[0] in poses]:
             self.detections.pop(k, None)
             self.thumbnails.pop(k, None)
         self.invalidate_calibration()
+        self.poses_changed.emit()
         self.detection_changed.emit(None)
+        return problems
 
     def set_saved_paths(self, paths: dict[str, str]) -> None:
         self.saved_paths = dict(paths)

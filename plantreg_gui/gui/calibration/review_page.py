@@ -179,6 +179,7 @@ class ReviewPage(WizardPage):
         self.model.review_changed.connect(self._review)
         self.model.calibration_changed.connect(self._relabel)
         self.model.view_selected.connect(lambda key: self.select(key[1], key[0]))
+        self.model.poses_changed.connect(self._fill_list)
         actions.busy_changed.connect(self._busy)
 
     def _busy(self, busy: bool) -> None:

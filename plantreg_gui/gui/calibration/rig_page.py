@@ -192,6 +192,7 @@ class RigPage(WizardPage):
         self._preview_timer.timeout.connect(self._update_preview)
         self._set_defaults()
         self.model.session_changed.connect(self.refresh)
+        self.model.poses_changed.connect(self._contents)
 
     # ------------------------------------------------------------------ form <-> session
     def _set_defaults(self) -> None:
