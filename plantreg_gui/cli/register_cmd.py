@@ -11,6 +11,7 @@ Progress goes to stderr (``--quiet`` silences it); the summary goes to stdout.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -97,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
     H, W = result.shape
     n = H * W
     print(f"registered into '{result.target}' ({W}x{H}); wrote {out}")
+    for w in result.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     for cam, counts in result.case_counts().items():
         # P1, P2, P3.1, P3.2, P5, P6 background, outside the source: % of all target pixels
         parts = [f"{_SHORT[c]} {100.0 * counts.get(c, 0) / n:5.1f}%" for c in (1, 2, 3, 4, 5, 0, 6)]

@@ -351,6 +351,7 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
         "areas": areas,
         "points": n_points,
         "timings": dict(result.timings),
+        "warnings": list(getattr(result, "warnings", [])),
         "export_timings": dict(export_timings or {}),
         "stats": dict(result.stats),
         "case_codes": {str(k): v for k, v in CASE_NAMES.items()},

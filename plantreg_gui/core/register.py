@@ -100,6 +100,7 @@ class RegistrationResult:
     params: RegistrationParams
     timings: dict[str, float] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)  # sentences for the user (e.g. core.roi.cut_warning)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -295,6 +296,7 @@ class Registrar:
         self._rays_rig: dict[str, np.ndarray] = {}   # camera -> (H*W, 3) unit directions, rig frame
         self._float_images: dict[str, np.ndarray] = {}
         self.timings: dict[str, float] = {}
+        self.warnings: list[str] = []  # about the inputs, found while preparing (see core/roi.py)
 
     # -- caches
     def ray_cache(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
@@ -352,6 +354,10 @@ class Registrar:
         with _stage(progress, self.timings, "depth rays", 0.0, 0.2):
             rays = self._camera_rays(dcam)
         self.meshes = build_meshes(self.rig, depth_m, self.params, rays, progress.sub(0.2, 1.0), self.timings)
+        from .roi import cut_warning  # an ROI that cuts off most of the plant looks complete otherwise
+
+        w = cut_warning(dcam.to_rig(rays * depth_m.reshape(-1, 1)), *self.params.roi(self.rig))
+        self.warnings = [w] if w else []
         if self.meshes.object.n_triangles == 0:
             raise InputError(
                 "no surface inside the region of interest: the depth map has no valid neighbouring "
@@ -476,6 +482,7 @@ class Registrar:
             params=p,
             timings=timings,
             stats=stats,
+            warnings=list(self.warnings),
         )
 
 
