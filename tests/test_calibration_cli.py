@@ -131,7 +131,7 @@ def test_unreadable_image(shared_data, tmp_path, capsys):
     s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04"])
     (s / "pose_03" / "right.jpg").write_bytes(b"not a jpeg")
     err = _run_fails(s, tmp_path, capsys)
-    assert "pose_03/right.jpg" in err and "not a readable image" in err
+    assert "pose_03/right.jpg" in err and "not a JPEG file" in err
 
 
 def test_bad_exclude_and_roi(shared_data, tmp_path, capsys):
