@@ -27,12 +27,14 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "(3D: depth mesh + ray casting) and write registered images, case maps, a point cloud "
         "and a summary into OUT.",
     )
-    p.add_argument("--rig", required=True, type=Path, metavar="RIG", help="rig file (plantreg.rig JSON)")
-    p.add_argument("--recording", required=True, type=Path, metavar="DIR",
+    from . import finite_float, nonempty_path
+
+    p.add_argument("--rig", required=True, type=nonempty_path, metavar="RIG", help="rig file (plantreg.rig JSON)")
+    p.add_argument("--recording", required=True, type=nonempty_path, metavar="DIR",
                    help="recording folder (with recording.json)")
     p.add_argument("--target", required=True, metavar="NAME", help="name of the target camera")
-    p.add_argument("--out", required=True, type=Path, metavar="OUT", help="output folder (must not exist or be empty)")
-    p.add_argument("--edge-angle", type=float, default=None, metavar="DEG",
+    p.add_argument("--out", required=True, type=nonempty_path, metavar="OUT", help="output folder (must not exist or be empty)")
+    p.add_argument("--edge-angle", type=finite_float, default=None, metavar="DEG",
                    help="mesh edge-cut angle in degrees (default 15, as in the paper)")
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -43,6 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from .. import cli
     from ..core.export import check_output_spares_inputs, write_outputs
+    from ..core.imageio import check_output_location
     from ..core.recording import Recording
     from ..core.register import AREA_P4, AREA_P5, AREA_P6, Registrar, RegistrationParams
     from ..core.rig import Rig
@@ -62,17 +65,10 @@ def run(args: argparse.Namespace) -> int:
         if not 0.0 < args.edge_angle < 90.0:
             raise InputError(f"--edge-angle must be between 0 and 90 degrees, got {args.edge_angle:g}")
         params.edge_angle_deg = float(args.edge_angle)
-    # fail before the long work, not after it
+    # fail before the long work, not after it: the output location (free or --overwrite, not an
+    # input, writable), then the recording (names, then every image's header and size)
     check_output_spares_inputs(out, [rig_path, args.recording])
-    if out.exists() and not out.is_dir():
-        raise InputError("output path exists and is not a folder", out)
-    parent = out.absolute().parent
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        raise InputError("output folder cannot be made: this is a file, not a folder", parent)
-    if out.is_dir() and any(out.iterdir()) and not args.overwrite:
-        raise InputError("output folder exists and is not empty (choose another, or pass --overwrite)", out)
+    check_output_location(out, "output", folder=True, overwrite=args.overwrite, inputs=[rig_path, args.recording])
     recording = Recording.load(args.recording, rig)
 
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))

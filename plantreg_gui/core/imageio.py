@@ -542,15 +542,17 @@ def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path
 
 
 @contextmanager
-def atomic_files(paths: list[str | Path]) -> Iterator[dict[Path, Path]]:
+def atomic_files(paths: list[str | Path], remove: list[str | Path] = ()) -> Iterator[dict[Path, Path]]:
     """Write several files as one transaction: yields {final path: temporary path beside it}.
 
     The caller writes every temporary file; when the block ends without error all of them are
-    moved into place together (signals held meanwhile). Existing files are moved aside first and
-    restored if any move fails, so the previous set survives any failure and the new set is never
-    half there. On error every temporary file is removed. OS errors name the final paths.
+    moved into place together (signals held meanwhile), and the existing files in ``remove``
+    (stale members of a previous set) disappear with them. Existing files are moved aside first
+    and restored if any move fails, so the previous set survives any failure and the new set is
+    never half there. On error every temporary file is removed. OS errors name the final paths.
     """
     finals = [Path(p) for p in paths]
+    stale = [Path(p) for p in remove if os.path.lexists(p) and Path(p) not in finals]
     if len({p.absolute() for p in finals}) != len(finals):
         raise InputError("two outputs of this command would be the same file: "
                          + ", ".join(sorted({str(p) for p in finals if finals.count(p) > 1})))
@@ -569,7 +571,7 @@ def atomic_files(paths: list[str | Path]) -> Iterator[dict[Path, Path]]:
         yield dict(tmps)
         with _signals_deferred():
             try:
-                for p in finals:
+                for p in finals + stale:
                     current = p
                     if os.path.lexists(p):
                         fd, b = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".old{p.suffix}", dir=p.parent)
