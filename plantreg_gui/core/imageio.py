@@ -132,8 +132,11 @@ def _read_npy(path: Path) -> np.ndarray:
                 shape, _fortran, dtype = npf.read_array_header_1_0(f)
             elif version == (2, 0):
                 shape, _fortran, dtype = npf.read_array_header_2_0(f)
+            elif version == (3, 0):  # 2.0 with a UTF-8 header; no public reader
+                impl = getattr(np.lib, "_format_impl", npf)
+                shape, _fortran, dtype = impl._read_array_header(f, version)
             else:
-                shape, _fortran, dtype = npf._read_array_header(f, version)
+                raise ValueError(f"unsupported .npy format version {version[0]}.{version[1]}")
         except ValueError as e:
             raise InputError(f"not a valid .npy file ({one_line(str(e))})", path) from None
         offset = f.tell()

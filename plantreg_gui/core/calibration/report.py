@@ -94,7 +94,10 @@ def write_calibration(rig: Rig | None, rig_path: str | Path | None, report: Cali
         texts[Path(rig_path)] = json.dumps(rig.to_dict(), indent=2) + "\n"
     with atomic_files(list(texts), remove=stale) as tmps:
         for final, text in texts.items():
-            tmps[final].write_text(text, encoding="utf-8")
+            try:
+                tmps[final].write_text(text, encoding="utf-8")
+            except OSError as e:  # write() errors carry no file name: give it the one being written
+                raise OSError(e.errno, e.strerror or str(e), str(tmps[final])) from None
     return list(texts)
 
 
