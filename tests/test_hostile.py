@@ -755,10 +755,17 @@ def _can_drop_privileges() -> str | None:
     return None
 
 
-def _as_nobody():
-    os.setgid(65534)
-    os.setgroups([])
-    os.setuid(65534)
+#: Run first in the child, as root: the interpreter lives under /root (mode 0700 here), so the
+#: child imports everything it needs, then becomes 'nobody' for the actual work.
+_DROP = textwrap.dedent("""
+    import os, sys
+    import numpy, cv2, tifffile, PIL.Image, PIL.PngImagePlugin, PIL.JpegImagePlugin, spectral.io.envi
+    import json, tempfile, shutil, signal, threading, stat, errno, warnings, re, math, argparse
+    import plantreg_gui.cli, plantreg_gui.cli.register_cmd, plantreg_gui.core.export, plantreg_gui.core.recording
+    import plantreg_gui.core.register, plantreg_gui.core.validate, numpy.lib.format, shlex
+    plantreg_gui.cli.build_parser()
+    os.setgroups([]); os.setgid(65534); os.setuid(65534)
+""")
 
 
 @pytest.mark.skipif(_can_drop_privileges() is not None, reason=str(_can_drop_privileges()))
@@ -780,7 +787,7 @@ def test_unprivileged_user_permission_errors():
         locked.mkdir(mode=0o755)  # root's: nobody cannot create anything in it
         writable = Path(tempfile.mkdtemp(prefix="plantreg-hostile-w-", dir="/tmp"))
         os.chmod(writable, 0o777)
-        code = textwrap.dedent(f"""
+        code = _DROP + textwrap.dedent(f"""
             import sys
             from plantreg_gui.core.imageio import read_image
             from plantreg_gui.core.errors import InputError
@@ -795,7 +802,7 @@ def test_unprivileged_user_permission_errors():
                            "--out", "{locked}/out", "--quiet"]))
         """)
         os.chmod(rec / "ir.npy", 0o600)
-        r = _child(code, preexec=_as_nobody, cwd=str(writable))
+        r = _child(code, cwd=str(writable))
         assert "hs.img" in r.stdout and "permission denied" in r.stdout, r.stdout
         assert "Exception ignored" not in r.stderr and "Traceback" not in r.stderr, r.stderr
         # the register: ir.npy is unreadable -> named (the output check comes first: locked/out)
@@ -803,7 +810,7 @@ def test_unprivileged_user_permission_errors():
         os.chmod(rec / "ir.npy", 0o644)
         code2 = code.replace(f"{locked}/out", f"{writable}/out")
         os.chmod(rec / "ir.npy", 0o600)
-        r = _child(code2, preexec=_as_nobody, cwd=str(writable))
+        r = _child(code2, cwd=str(writable))
         assert r.returncode == 1 and str(rec / "ir.npy") in r.stderr and "permission denied" in r.stderr, r.stderr
         assert list(locked.iterdir()) == [] and list(writable.iterdir()) == []
     finally:
