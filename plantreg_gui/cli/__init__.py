@@ -137,6 +137,13 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{e.filename}: " if e.filename else ""
         print(f"plantreg: error: {where}{e.strerror or e}", file=sys.stderr)
         return 1
+    except Exception as e:
+        if type(e).__module__.startswith("cv2"):  # an OpenCV refusal we did not foresee: one line, not a page
+            from ..core.errors import one_line
+
+            print(f"plantreg: error: OpenCV: {one_line(str(e))}", file=sys.stderr)
+            return 1
+        raise
     finally:
         for sig, h in old_handlers.items():
             signal.signal(sig, h)

@@ -159,8 +159,14 @@ class Board:
             raise ValueError(f"board lacks {', '.join(missing)}")
         from ..validate import number, positive_int
 
+        from ..validate import show
+
         for k in ("columns", "rows"):  # int() would silently make 8.5 corners 8
-            positive_int(d[k], f"board.{k} (inner corners)", 1000)
+            try:
+                positive_int(d[k], f"board.{k}", 1000)
+            except ValueError:
+                raise ValueError(f"board: {k} must be a whole number of inner corners (1 to 1000), "
+                                 f"got {show(d[k])}") from None
         number(d["square_size"], "board.square_size (metres)", positive=True)
         if d.get("marker_size") is not None:
             number(d["marker_size"], "board.marker_size (metres)", positive=True)
