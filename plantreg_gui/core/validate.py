@@ -15,9 +15,10 @@ with it would give one value for every pixel, or none):
   it is refused), focal lengths between :data:`FOCAL_MIN_FACTOR` and :data:`FOCAL_MAX_FACTOR`
   times the image's larger side, ``fx / fy`` within :data:`MAX_ASPECT` either way, the principal
   point within the image extended by its own size on every side;
-* ``dist``: 4, 5, 8, 12 or 14 coefficients that keep the radial mapping increasing from the
-  image centre out to :data:`DIST_CHECK_FRACTION` of the way to the image's farthest corner
-  and scale radii by at most :data:`MAX_DISTORTION_SCALE` either way there (a mapping that folds back shows one scene point
+* ``dist``: 4, 5, 8, 12 or 14 coefficients whose radial mapping keeps increasing inside the
+  image's inscribed circle (about the principal point) and scales radii by at most
+  :data:`MAX_DISTORTION_SCALE` either way out to the farthest corner (fitted polynomials may
+  turn in the corners, where boards rarely reach: accepted, see :func:`check_distortion`) (a mapping that folds back shows one scene point
   at two radii; one that shrinks or stretches the image more is not a lens);
 * ``R``: a rotation (orthonormal within :data:`ROTATION_TOL`, determinant +1);
 * ``t``: at most :data:`MAX_TRANSLATION_M` metres from the depth camera (a phenotyping rig fits
@@ -43,10 +44,6 @@ FOCAL_MIN_FACTOR = 0.05
 FOCAL_MAX_FACTOR = 100.0
 MAX_ASPECT = 4.0
 MAX_DISTORTION_SCALE = 4.0
-#: Distortion is checked out to this fraction of the radius of the image's farthest corner: the
-#: corner tips, which calibration boards rarely reach, are where a fitted polynomial may turn
-#: without harm (OpenCV's 5-coefficient fit of a wide-angle ToF camera folds at ~99.6 %).
-DIST_CHECK_FRACTION = 0.9
 ROTATION_TOL = 1e-4
 MAX_TRANSLATION_M = 100.0
 MAX_NAME_LEN = 64
@@ -186,34 +183,46 @@ def radial_scale(dist: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 
 def check_distortion(dist: np.ndarray, K: np.ndarray, width: int, height: int, key: str) -> None:
-    """The radial mapping r -> r * radial_scale(r) must increase from 0 out to the normalised
-    radius of the image's farthest corner and scale radii by at most MAX_DISTORTION_SCALE."""
+    """Distortion sanity (normalised radii r, distorted radius r_d = r * radial_scale(r)):
+
+    * inside the image's inscribed circle (the largest circle about the principal point that
+      lies in the image) r_d must increase with r -- no fold where every direction has data;
+    * out to the farthest image corner (or to where a fitted polynomial turns beyond that
+      circle) the scale r_d / r must stay within 1/MAX_DISTORTION_SCALE .. MAX_DISTORTION_SCALE.
+
+    Fitted polynomials often turn in the image corners, where the board never reached; that is
+    accepted (docs/errors.md), a fold inside the inscribed circle is not."""
     if dist.size not in DIST_LENGTHS:
         raise ValueError(f"{key}.dist has {dist.size} coefficients (OpenCV takes 4, 5, 8, 12 or 14)")
     if not np.any(dist):
         return
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    corners = np.array([[-0.5, -0.5], [width - 0.5, -0.5], [-0.5, height - 0.5], [width - 0.5, height - 0.5]])
-    rd_max = DIST_CHECK_FRACTION * float(np.max(np.hypot((corners[:, 0] - cx) / fx, (corners[:, 1] - cy) / fy)))
-    # undistorted radii: the distorted image corner must be reached before the scale bound ends
-    r = np.linspace(0.0, MAX_DISTORTION_SCALE * rd_max, 8001)[1:]
+    xs = np.array([-0.5 - cx, width - 0.5 - cx]) / fx
+    ys = np.array([-0.5 - cy, height - 0.5 - cy]) / fy
+    rd_corner = float(np.max(np.hypot(xs[:, None], ys[None, :])))
+    inside = cx > -0.5 and cx < width - 0.5 and cy > -0.5 and cy < height - 0.5
+    rd_in = float(min(np.abs(xs).min(), np.abs(ys).min())) if inside else 0.0
+    r = np.linspace(0.0, MAX_DISTORTION_SCALE * rd_corner, 8001)[1:]
     s = radial_scale(dist, r)
     rd = r * s
-    reach = np.flatnonzero(np.isfinite(rd) & (rd >= rd_max))
-    end = int(reach[0]) + 1 if reach.size else len(r)
-    seg_s, seg_rd = s[:end], rd[:end]
-    folds = np.flatnonzero(np.diff(seg_rd) <= 0)
-    if folds.size:
-        at = seg_rd[folds[0]]
+    ok = np.isfinite(rd)
+    down = np.flatnonzero(~ok[1:] | ~ok[:-1] | (np.diff(rd) <= 0))
+    first_fold = int(down[0]) if down.size else len(r) - 1
+    reach_in = np.flatnonzero(ok & (rd >= rd_in))
+    if rd_in > 0 and (not reach_in.size or first_fold < reach_in[0]):
+        at = rd[first_fold] if np.isfinite(rd[first_fold]) else 0.0
         raise ValueError(f"{key}.dist {show(dist.tolist(), 60)} folds the image: the distorted radius stops "
-                         f"increasing at {100 * DIST_CHECK_FRACTION * at / rd_max:.0f} % of the way to the image corner, so points "
-                         "beyond it would be imaged twice")
+                         f"increasing at {100 * at / rd_corner:.0f} % of the way to the image corner, inside the "
+                         "image's inscribed circle, so points beyond it would be imaged twice")
+    reach_corner = np.flatnonzero(ok & (rd >= rd_corner))
+    end = min(first_fold, int(reach_corner[0]) if reach_corner.size else len(r) - 1) + 1
+    seg_s, seg_rd = s[:end], rd[:end]
     bad_scale = ~(np.isfinite(seg_s) & (seg_s >= 1 / MAX_DISTORTION_SCALE) & (seg_s <= MAX_DISTORTION_SCALE))
     if bad_scale.any():
         i = int(np.argmax(bad_scale))
         raise ValueError(f"{key}.dist {show(dist.tolist(), 60)} scales the image radius by {seg_s[i]:.3g} at "
-                         f"{100 * DIST_CHECK_FRACTION * min(seg_rd[i] / rd_max, 1):.0f} % of the way to the image corner; the sanity bound "
-                         f"is {1 / MAX_DISTORTION_SCALE:g} to {MAX_DISTORTION_SCALE:g} (wrong coefficients, or "
+                         f"{100 * min(seg_rd[i] / rd_corner, 1):.0f} % of the way to the image corner; the sanity "
+                         f"bound is {1 / MAX_DISTORTION_SCALE:g} to {MAX_DISTORTION_SCALE:g} (wrong coefficients, or "
                          "coefficients of another camera model?)")
 
 
