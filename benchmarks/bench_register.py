@@ -40,7 +40,7 @@ def _prepare(data: Path) -> None:
         return
     print(f"rendering the paper-sized synthetic recording into {data} (not timed) ...", flush=True)
     t0 = time.perf_counter()
-    write_demo(data, size="paper", seed=0, overwrite=True, calibration=False)
+    write_demo(data, size="paper", seed=0, overwrite=True, calibration=False, clean=True)
     print(f"  rendered and written in {time.perf_counter() - t0:.1f} s")
 
 

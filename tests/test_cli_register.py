@@ -340,7 +340,7 @@ def _run_main(argv):
 def demo(tmp_path_factory):
     from plantreg_gui.core.synthetic import write_demo
 
-    return write_demo(tmp_path_factory.mktemp("demo") / "demo")
+    return write_demo(tmp_path_factory.mktemp("demo") / "demo", clean=True)
 
 
 @pytest.fixture(scope="module")

@@ -68,6 +68,14 @@ class RegistrationParams:
     roi_max: np.ndarray | None = None
     uncertainty_tol_m: float = 0.002    # an uncertainty-mesh hit this much before the point counts (P3.1, P3.2)
     boundary_px: float = 0.5            # skirt around the object mesh's boundary, depth pixels (0 = none)
+    # ToF clean-up before meshing (core/depthfilter.py, docs/registration.md section 1a)
+    flying_filter: bool = True          # remove flying pixels (depth between two surfaces)
+    flying_jump_rel: float = 0.01       # a depth jump counts above this fraction of the depth (1 cm at 1 m)
+    flying_repair: bool = True          # move flying pixels onto the surface they mostly saw (False: remove)
+    denoise: bool = True                # edge-preserving same-surface plane fit
+    denoise_size: int = 5               # window of the plane fit, depth pixels (odd)
+    denoise_tol_rel: float = 0.01       # same surface: |dz| <= this fraction of the depth
+    mixed_radius_px: float = 1.0        # mixed-pixel flag: source px around a silhouette (+ 2 x camera blur_px)
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
@@ -98,6 +106,11 @@ class RegistrationResult:
     params: RegistrationParams
     timings: dict[str, float] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
+    #: (H_depth, W_depth) bool: depth pixels removed as flying before meshing (depth camera's grid)
+    flying: np.ndarray | None = None
+    #: source camera -> (H, W) bool: P1 pixels whose footprint in the source reaches across a
+    #: silhouette of the object mesh (see core/mixed.py); statistics can exclude them
+    mixed: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -231,6 +244,7 @@ class Meshes:
     uncertainty: TriMesh
     object_scene: MeshScene
     uncertainty_scene: MeshScene
+    flying: np.ndarray | None = None  # (H, W) bool depth pixels removed as flying
 
 
 def build_meshes(rig: Rig, depth_m: np.ndarray, params: RegistrationParams | None = None,
@@ -240,16 +254,44 @@ def build_meshes(rig: Rig, depth_m: np.ndarray, params: RegistrationParams | Non
     params = params or RegistrationParams()
     progress = ensure_reporter(progress)
     timings = {} if timings is None else timings
+    depth_raw = depth_m
     dcam = rig.depth()
     lo, hi = params.roi(rig)
-    with _stage(progress, timings, "mesh", 0.0, 0.7):
+    with _stage(progress, timings, "depth filter", 0.0, 0.1):
+        depth_m, flying = filter_depth(depth_m, params)
+    with _stage(progress, timings, "mesh", 0.1, 0.7):
         obj = object_mesh(dcam, depth_m, lo, hi, params.edge_angle_deg, rays_cam)
-        obj = extend_boundary(obj, dcam, params.boundary_px, depth_m)
+        if flying.any() and obj.in_roi is not None:
+            # removed flying pixels inside the ROI stay "object area without a certain surface" (P5)
+            obj.in_roi = obj.in_roi | _flying_in_roi(dcam, flying, depth_raw, lo, hi, rays_cam)
+        obj = extend_boundary(obj, dcam, params.boundary_px, depth_m, flying=flying, depth_raw=depth_raw)
         obj_scene = MeshScene(obj.vertices, obj.triangles)
     with _stage(progress, timings, "uncertainty mesh", 0.7, 1.0):
         unc = uncertainty_mesh(obj, dcam.center_rig, float(hi[2]))
         unc_scene = MeshScene(unc.vertices, unc.triangles)
-    return Meshes(obj, unc, obj_scene, unc_scene)
+    return Meshes(obj, unc, obj_scene, unc_scene, flying)
+
+
+def filter_depth(depth_m: np.ndarray, params: RegistrationParams) -> tuple[np.ndarray, np.ndarray]:
+    """The ToF clean-up the parameters ask for: (cleaned depth (H, W) float32 metres, NaN = none;
+    flying-pixel mask (H, W) bool)."""
+    from .depthfilter import clean_depth
+
+    return clean_depth(depth_m, params.flying_filter, params.flying_jump_rel, params.denoise,
+                       params.denoise_size, params.denoise_tol_rel, params.flying_repair)
+
+
+def _flying_in_roi(dcam: Camera, flying: np.ndarray, depth_m: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                   rays_cam: np.ndarray | None) -> np.ndarray:
+    """(H, W) bool: flying pixels whose raw measurement lies inside the ROI."""
+    idx = np.flatnonzero(flying)
+    d = pixel_rays_cam(dcam)[idx] if rays_cam is None else rays_cam[idx]
+    z = np.asarray(depth_m, dtype=np.float64).reshape(-1)[idx]
+    X = dcam.to_rig(d.astype(np.float64) * z[:, None])
+    out = np.zeros(flying.size, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        out[idx] = np.all((X >= lo) & (X <= hi), axis=1)
+    return out.reshape(flying.shape)
 
 
 @contextmanager
@@ -394,6 +436,7 @@ class Registrar:
         registered: dict[str, np.ndarray] = {}
         source_uv: dict[str, np.ndarray] = {}
         cases: dict[str, np.ndarray] = {}
+        mixed: dict[str, np.ndarray] = {}
         Xh = points[obj_idx]
 
         # the target itself: its own pixel, its own raw value
@@ -455,6 +498,8 @@ class Registrar:
                                  "triangles": meshes.uncertainty.n_triangles},
             "target_pixels": int(N),
             "object_hits": int(len(obj_idx)),
+            "flying_pixels": int(meshes.flying.sum()) if meshes.flying is not None else 0,
+            "mixed_pixels": {cam: int(m.sum()) for cam, m in mixed.items()},
         }
         progress(1.0, "done")
         return RegistrationResult(
@@ -467,6 +512,8 @@ class Registrar:
             params=p,
             timings=timings,
             stats=stats,
+            flying=meshes.flying,
+            mixed=mixed,
         )
 
 
@@ -493,7 +540,9 @@ def _mesh_key(rig: Rig, depth_m: np.ndarray, params: RegistrationParams) -> tupl
     lo, hi = params.roi(rig)
     h = hashlib.blake2b(np.ascontiguousarray(depth_m, dtype=np.float32).tobytes(), digest_size=16).hexdigest()
     geom = np.concatenate([dcam.K.ravel(), dcam.dist, dcam.R_cam_rig.ravel(), dcam.t_cam_rig, lo, hi,
-                           [params.edge_angle_deg, params.boundary_px, dcam.width, dcam.height]])
+                           [params.edge_angle_deg, params.boundary_px, dcam.width, dcam.height,
+                            params.flying_filter, params.flying_jump_rel, params.denoise, params.denoise_size,
+                            params.denoise_tol_rel, params.flying_repair]])
     return (h, geom.tobytes())
 
 
