@@ -350,6 +350,26 @@ class Registrar:
                 self._rays_rig[cam.name] = pixel_rays_rig(cam)
         return self._rays_rig[cam.name]
 
+    def _mixed(self, scam: Camera, uvh: np.ndarray, case_h: np.ndarray, obj_idx: np.ndarray,
+               shape: tuple[int, int]) -> np.ndarray:
+        """(H, W) bool: P1 pixels whose footprint in ``scam`` reaches across a silhouette (core/mixed.py)."""
+        from .mixed import mixed_radius, silhouette_distance
+
+        meshes = self.meshes
+        assert meshes is not None
+        out = np.zeros(shape[0] * shape[1], dtype=bool)
+        r = mixed_radius(scam, self.params.mixed_radius_px)
+        p1 = np.flatnonzero(case_h == CASE_P1)
+        unc = meshes.uncertainty
+        if r <= 0 or len(p1) == 0 or unc.n_triangles == 0:
+            return out.reshape(shape)
+        # the curtains' top edges are the object mesh's boundary edges (mesh.uncertainty_mesh)
+        n_top, n_edges = unc.n_vertices // 2, unc.n_triangles // 2
+        d = silhouette_distance(scam, unc.vertices[:n_top], unc.triangles[:n_edges, :2], meshes.object_scene,
+                                uvh[p1], self.params.occlusion_tol_m, max_px=r)
+        out[obj_idx[p1]] = d <= r
+        return out.reshape(shape)
+
     @staticmethod
     def _depth_camera_hits(meshes: Meshes, N: int) -> tuple[np.ndarray, ...]:
         """Target rays of the depth camera itself, answered exactly instead of cast.
@@ -482,6 +502,8 @@ class Registrar:
                 uv = np.full((N, 2), np.nan, dtype=np.float32)
                 uv[obj_idx] = uvh
                 source_uv[scam.name] = uv.reshape(H, W, 2)
+            with _stage(progress, timings, f"mixed {scam.name}", a + 0.45 * (b - a), a + 0.5 * (b - a)):
+                mixed[scam.name] = self._mixed(scam, uvh, case_h, obj_idx, (H, W))
             if scam.name in images:
                 with _stage(progress, timings, f"sampling {scam.name}", a + 0.5 * (b - a), b):
                     img = images[scam.name]
