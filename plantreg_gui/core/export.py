@@ -4,6 +4,8 @@
 OUT/registered/<camera>.tif   float32, target H x W (x bands), NaN where not mapped
 OUT/registered/<camera>.png   display preview (colour map / PCA false colour, contrast stretched)
 OUT/cases/<camera>.png        uint8 case code per target pixel, every source camera
+OUT/cases/<camera>_edge.png   uint8 255 = P1 pixel flagged mixed (footprint across a silhouette), else 0
+OUT/flying.png                uint8 255 = depth pixel detected as flying (depth camera's grid), else 0
 OUT/areas.png                 uint8 area code per target pixel (4 = P4, 5 = P5, 6 = P6)
 OUT/pointcloud.ply            object-mesh hits (rig frame) with every camera's values + RGB colour
 OUT/mosaic.png                tiles alternating the modalities' previews
@@ -37,11 +39,11 @@ from .register import AREA_NAMES, CASE_NAMES, RegistrationResult
 from .rig import Rig
 
 SUMMARY_FORMAT = "plantreg.summary"
-SUMMARY_VERSION = 1
+SUMMARY_VERSION = 2  # 2: "tof" (flying pixels, mixed-pixel flags), parameters of the depth clean-up
 
 #: Selectable parts of the output (``what``): float TIFFs, display PNGs, case maps, area map,
 #: point cloud, mosaic, summary.
-OUTPUTS = ("registered", "previews", "cases", "areas", "pointcloud", "mosaic", "summary")
+OUTPUTS = ("registered", "previews", "cases", "edges", "areas", "pointcloud", "mosaic", "summary")
 
 #: PLY vertex properties that are not camera values.
 _PLY_FIXED = ("x", "y", "z", "red", "green", "blue", "row", "col")
@@ -99,6 +101,8 @@ def write_outputs(
         steps += [(f"previews:{c}", 1.0 + 0.01 * _bands(result.registered[c])) for c in cams]
     if "cases" in sel:
         steps += [(f"cases:{c}", 0.3) for c in result.cases]
+    if "edges" in sel:
+        steps += edge_steps(result)
     if "areas" in sel:
         steps.append(("areas", 0.3))
     if "pointcloud" in sel:
@@ -127,6 +131,8 @@ def write_outputs(
             elif kind == "cases":
                 rel = f"cases/{_safe(cam)}.png"
                 write_png(tmp / rel, np.asarray(result.cases[cam], dtype=np.uint8))
+            elif kind in ("edges", "flying"):
+                rel = write_edge_step(tmp, result, kind, cam)
             elif kind == "areas":
                 rel = "areas.png"
                 write_png(tmp / rel, np.asarray(result.area, dtype=np.uint8))
@@ -166,6 +172,44 @@ def check_output_spares_inputs(out: str | Path, inputs: Iterable[str | Path]) ->
                              "outside the recording and the rig file's folder", out)
 
 
+# ---------------------------------------------------------------------- mixed-pixel and flying-pixel masks
+def edge_steps(result: RegistrationResult) -> list[tuple[str, float]]:
+    """Export steps of the ToF masks: ``edges:<cam>`` per source with a mixed flag, ``flying``."""
+    steps = [(f"edges:{c}", 0.3) for c in result.mixed]
+    if result.flying is not None:
+        steps.append(("flying", 0.2))
+    return steps
+
+
+def write_edge_step(folder: Path, result: RegistrationResult, kind: str, cam: str) -> str:
+    """Write ``cases/<cam>_edge.png`` (kind ``edges``) or ``flying.png`` into ``folder``; returns
+    the relative path. Masks are uint8, 255 = flagged, so any viewer shows them."""
+    if kind == "edges":
+        rel = f"cases/{_safe(cam)}_edge.png"
+        mask = np.asarray(result.mixed[cam], dtype=bool)
+    else:
+        rel = "flying.png"
+        mask = np.asarray(result.flying, dtype=bool)
+    write_png(folder / rel, np.where(mask, 255, 0).astype(np.uint8))
+    return rel
+
+
+def tof_summary(result: RegistrationResult) -> dict[str, Any]:
+    """The ``tof`` block of ``summary.json``: flying-pixel count, per-source mixed-pixel counts."""
+    fly = result.flying
+    n_depth = int(np.asarray(fly).size) if fly is not None else 0
+    n_fly = int(np.count_nonzero(fly)) if fly is not None else 0
+    mixed = {}
+    for cam, m in result.mixed.items():
+        n_p1 = int(np.count_nonzero(np.asarray(result.cases[cam]) == 1)) if cam in result.cases else 0
+        n_m = int(np.count_nonzero(m))
+        mixed[cam] = {"pixels": n_m, "percent_of_p1": round(100.0 * n_m / n_p1, 3) if n_p1 else 0.0}
+    return {"flying_pixels": n_fly, "flying_percent_of_depth": round(100.0 * n_fly / n_depth, 4) if n_depth else 0.0,
+            "flying_handling": ("repaired" if getattr(result.params, "flying_repair", True) else "removed")
+            if getattr(result.params, "flying_filter", False) else "off",
+            "mixed": mixed}
+
+
 # ---------------------------------------------------------------------- registered images
 # ---------------------------------------------------------------------- point cloud
 def ply_property_names(result: RegistrationResult, cams: list[str] | None = None) -> dict[str, list[str]]:
@@ -192,7 +236,8 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
     Vertex properties: ``x, y, z`` float32 (rig frame, metres); ``red, green, blue`` uchar from
     ``colours_rgb8`` (H, W, 3) (a display rendering); ``row, col`` int32 (the target pixel);
     per camera its registered value(s) as float32 (NaN where that camera is not mapped); per
-    source camera ``<cam>_case`` uchar (the case code). Points with NaN coordinates are dropped.
+    source camera ``<cam>_case`` uchar (the case code) and ``<cam>_mixed`` uchar (1 = flagged mixed).
+    Points with NaN coordinates are dropped.
     """
     from plyfile import PlyData, PlyElement
 
@@ -218,6 +263,14 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
         used.add(p)
         case_props[cam] = p
         dtype.append((p, "u1"))
+    mixed_props: dict[str, str] = {}
+    for cam in getattr(result, "mixed", {}):
+        p = f"{_ply_name(cam)}_mixed"
+        while p in used:
+            p += "_"
+        used.add(p)
+        mixed_props[cam] = p
+        dtype.append((p, "u1"))
     v = np.empty(n, dtype=dtype)
     sel = pts[rows, cols]
     v["x"], v["y"], v["z"] = sel[:, 0], sel[:, 1], sel[:, 2]
@@ -237,6 +290,8 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
                 v[p] = vals[:, b]
     for cam, p in case_props.items():
         v[p] = np.asarray(result.cases[cam], dtype=np.uint8)[rows, cols]
+    for cam, p in mixed_props.items():
+        v[p] = np.asarray(result.mixed[cam], dtype=np.uint8)[rows, cols]
     rep(0.85, "point cloud: writing")
     el = PlyElement.describe(v, "vertex")
     with atomic_path_suffixed(path) as tmp:
@@ -300,6 +355,7 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
         "timings": dict(result.timings),
         "export_timings": dict(export_timings or {}),
         "stats": dict(result.stats),
+        "tof": tof_summary(result),
         "case_codes": {str(k): v for k, v in CASE_NAMES.items()},
         "area_codes": {str(k): v for k, v in AREA_NAMES.items()},
         "files": list(files or []),
@@ -401,8 +457,9 @@ def _colour_camera(result: RegistrationResult, rig: Rig) -> str | None:
 
 def _step_label(kind: str, cam: str) -> str:
     return {"registered": f"registered/{cam}.tif", "previews": f"registered/{cam}.png",
-            "cases": f"cases/{cam}.png"}.get(kind, {"areas": "areas.png", "pointcloud": "pointcloud.ply",
-                                                     "mosaic": "mosaic.png"}.get(kind, kind))
+            "cases": f"cases/{cam}.png", "edges": f"cases/{cam}_edge.png"}.get(
+        kind, {"areas": "areas.png", "pointcloud": "pointcloud.ply", "flying": "flying.png",
+               "mosaic": "mosaic.png"}.get(kind, kind))
 
 
 __all__ = ["OUTPUTS", "write_outputs", "write_ply", "build_summary", "ply_property_names"]
