@@ -92,12 +92,14 @@ def flying_pixels(depth_m: np.ndarray, jump_rel: float = 0.01, radius: int = 2,
     return valid & ((between & (support <= max_support)) | (support <= 0))
 
 
-def denoise_depth(depth_m: np.ndarray, tol_rel: float = 0.01, size: int = 5, min_support: int = 6,
-                  exclude: np.ndarray | None = None) -> np.ndarray:
+def denoise_depth(depth_m: np.ndarray, tol_rel: float = 0.01, size: int = 3, min_support: int = 6,
+                  exclude: np.ndarray | None = None, block_rows: int = 24) -> np.ndarray:
     """Edge-preserving denoising by same-surface plane fits; see the module docstring.
 
     ``depth_m`` (H, W) metres (NaN = none); ``exclude`` (H, W) bool pixels that must not enter
-    another pixel's fit (flying pixels; their own depth is still refined from the others). Returns (H, W) float32, NaN where the input is.
+    another pixel's fit (flying pixels; their own depth is still refined from the others).
+    Returns (H, W) float32, NaN where the input is. Works in blocks of ``block_rows`` rows so
+    that the (size^2, rows, W) neighbour stack stays in the CPU cache.
     """
     z = np.asarray(depth_m, dtype=np.float32)
     with np.errstate(invalid="ignore"):
@@ -105,30 +107,47 @@ def denoise_depth(depth_m: np.ndarray, tol_rel: float = 0.01, size: int = 5, min
     H, W = z.shape
     r = size // 2
     src = z if exclude is None else np.where(exclude, np.float32(np.nan), z)
-    d, du, dv = _shifted(src, r, z)
-    with np.errstate(invalid="ignore"):
-        m = np.abs(d) <= np.float32(tol_rel) * z  # NaN compares False
-    M = m.reshape(len(du), -1).astype(np.float32)
-    np.copyto(d, 0, where=~m)
-    D = d.reshape(len(du), -1)
-    # normal equations of d = a0 + au * du + av * dv over the selected neighbours
-    S = np.stack([np.ones_like(du), du, dv, du * du, dv * dv, du * dv]) @ M  # (6, N)
-    B = np.stack([np.ones_like(du), du, dv]) @ D  # (3, N)
-    n, su, sv, suu, svv, suv = S  # float32 is plenty: integer sums <= 25 * 4, depth differences ~1e-3
-    b0, bu, bv = B
-    # Cramer's rule for a0 of [[n, su, sv], [su, suu, suv], [sv, suv, svv]] @ a = b
-    c0 = suu * svv - suv * suv
-    c1 = su * svv - suv * sv
-    c2 = su * suv - suu * sv
-    det = n * c0 - su * c1 + sv * c2
-    det0 = b0 * c0 - su * (bu * svv - suv * bv) + sv * (bu * suv - suu * bv)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        plane = det0 / det
-        mean = b0 / n
-    # a well-conditioned plane needs spread in both directions (det / n^3 = det of the offsets' covariance, px^4)
-    good = (n >= min_support) & (det > np.float32(0.25) * n ** 3)
-    corr = np.where(good, plane, np.where(n >= 3, mean, np.float32(0)))
-    return (z.reshape(-1) + np.nan_to_num(corr)).reshape(H, W)
+    zp = np.pad(src, r, mode="constant", constant_values=np.nan)
+    dv, du = np.mgrid[-r:r + 1, -r:r + 1]
+    du, dv = du.ravel(), dv.ravel()
+    K = len(du)
+    fu, fv = du.astype(np.float32), dv.astype(np.float32)
+    A = np.stack([np.ones_like(fu), fu, fv, fu * fu, fv * fv, fu * fv])  # (6, K)
+    Bc = A[:3]
+    out = np.empty_like(z)
+    rows = max(1, int(block_rows))
+    d = np.empty((K, rows, W), dtype=np.float32)
+    tmp = np.empty((K, rows, W), dtype=np.float32)
+    m = np.empty((K, rows, W), dtype=bool)
+    for r0 in range(0, H, rows):
+        r1 = min(H, r0 + rows)
+        h = r1 - r0
+        zc = z[r0:r1]
+        db, tb, mb = d[:, :h], tmp[:, :h], m[:, :h]
+        for k in range(K):
+            np.subtract(zp[r0 + r + dv[k]:r1 + r + dv[k], r + du[k]:r + du[k] + W], zc, out=db[k])
+        tol = np.float32(tol_rel) * zc
+        np.abs(db, out=tb)
+        with np.errstate(invalid="ignore"):
+            np.less_equal(tb, tol, out=mb)  # NaN compares False
+        Mf = mb.reshape(K, -1).astype(np.float32)
+        D = db.reshape(K, -1)
+        np.copyto(D, 0, where=~mb.reshape(K, -1))
+        n, su, sv, suu, svv, suv = A @ Mf  # normal equations of d = a0 + au * du + av * dv
+        b0, bu, bv = Bc @ D
+        # Cramer's rule for a0 of [[n, su, sv], [su, suu, suv], [sv, suv, svv]] @ a = b (float32 is
+        # plenty: integer sums <= 25 * 4, depth differences ~1e-3)
+        c0 = suu * svv - suv * suv
+        det = n * c0 - su * (su * svv - suv * sv) + sv * (su * suv - suu * sv)
+        det0 = b0 * c0 - su * (bu * svv - suv * bv) + sv * (bu * suv - suu * bv)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            plane = det0 / det
+            mean = b0 / n
+        # a well-conditioned plane needs spread in both directions (det / n^3 = det of the offsets' covariance, px^4)
+        good = (n >= min_support) & (det > np.float32(0.25) * n ** 3)
+        corr = np.where(good, plane, np.where(n >= 3, mean, np.float32(0)))
+        out[r0:r1] = zc + np.nan_to_num(corr).reshape(h, W)
+    return out
 
 
 def snap_flying(depth_m: np.ndarray, flying: np.ndarray) -> np.ndarray:
@@ -163,7 +182,7 @@ def snap_flying(depth_m: np.ndarray, flying: np.ndarray) -> np.ndarray:
 
 
 def clean_depth(depth_m: np.ndarray, flying: bool = True, jump_rel: float = 0.01, denoise: bool = True,
-                denoise_size: int = 5, denoise_tol_rel: float = 0.01,
+                denoise_size: int = 3, denoise_tol_rel: float = 0.01,
                 repair: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Flying-pixel detection, then denoising: returns the cleaned depth (H, W) float32 metres
     (NaN where none) and the flying-pixel mask (H, W) bool. Flying pixels are moved onto the
