@@ -284,3 +284,24 @@ def test_demo_command_has_a_clean_option(demo_dir):
     p = argparse.ArgumentParser()
     add_parser(p.add_subparsers())
     assert p.parse_args(["demo", "x", "--clean"]).clean and not p.parse_args(["demo", "x"]).clean
+
+
+def test_write_demo_is_realistic_by_default(tmp_path, monkeypatch):
+    """`plantreg demo` renders the ToF artefacts and a blurred thermal camera unless --clean."""
+    from plantreg_gui.core.synthetic import demo as demo_mod
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_render(rig, scene, depth_noise=(0.0, 0.0), seed=0, progress=None, **kw):
+        seen.append((rig.camera("thermal").extra.get("blur_px"), tuple(depth_noise), kw.get("tof")))
+        raise Stop
+
+    monkeypatch.setattr(demo_mod, "render_recording", fake_render)
+    for clean in (False, True):
+        with pytest.raises(Stop):
+            demo_mod.write_demo(tmp_path / f"d{clean}", calibration=False, clean=clean)
+    assert seen == [(1.0, (0.001, 0.001), True), (None, (0.0, 0.0), False)]
+    assert not list(tmp_path.iterdir())  # nothing half-written
