@@ -76,20 +76,41 @@ def flying_pixels(depth_m: np.ndarray, jump_rel: float = 0.01, radius: int = 2,
     with np.errstate(invalid="ignore"):
         valid = z > 0
     z = np.where(valid, z, np.float32(np.nan))
+    H, W = z.shape
     tol = np.float32(jump_rel) * z
+    z_lo = np.where(valid, z, np.float32(np.inf))
+    z_hi = np.where(valid, z, np.float32(-np.inf))
+
+    def nearest(k: np.ndarray) -> np.ndarray:  # min filter (no measurement ignored)
+        return cv2.erode(z_lo, k, borderType=cv2.BORDER_CONSTANT, borderValue=float(np.inf))
+
+    def farthest(k: np.ndarray) -> np.ndarray:
+        return cv2.dilate(z_hi, k, borderType=cv2.BORDER_CONSTANT, borderValue=float(-np.inf))
+
     k = 2 * radius + 1
-    kernel = np.ones((k, k), np.uint8)
-    # nearest and farthest neighbour in the window (min / max filters; no measurement ignored)
-    zmin = cv2.erode(np.where(valid, z, np.float32(np.inf)), kernel, borderType=cv2.BORDER_CONSTANT,
-                     borderValue=float(np.inf))
-    zmax = cv2.dilate(np.where(valid, z, np.float32(-np.inf)), kernel, borderType=cv2.BORDER_CONSTANT,
-                      borderValue=float(-np.inf))
+    box = np.ones((k, k), np.uint8)
+    ring = np.ones((3, 3), np.uint8)
+    ring[1, 1] = 0  # the 8 direct neighbours, not the pixel itself
     with np.errstate(invalid="ignore"):
-        between = (zmin < z - tol) & (zmax > z + tol)
-    d, _du, _dv = _shifted(z, 1)
-    with np.errstate(invalid="ignore"):
-        support = np.count_nonzero(np.abs(d) <= tol, axis=0) - 1  # not the pixel itself
-    return valid & ((between & (support <= max_support)) | (support <= 0))
+        between = (nearest(box) < z - tol) & (farthest(box) > z + tol)
+        # spikes: every direct neighbour farther (or every one nearer) by more than the tolerance
+        isolated = (nearest(ring) > z + tol) | (farthest(ring) < z - tol)
+    # same-surface support among the 8 direct neighbours, only where it decides
+    idx = np.flatnonzero(between)
+    zp = np.pad(z, 1, mode="constant", constant_values=np.nan).reshape(-1)
+    r, c = np.divmod(idx, W)
+    centre = (r + 1) * (W + 2) + (c + 1)
+    support = np.zeros(len(idx), dtype=np.int16)
+    zc, tc = z.reshape(-1)[idx], tol.reshape(-1)[idx]
+    for dv in (-1, 0, 1):
+        for du in (-1, 0, 1):
+            if dv or du:
+                with np.errstate(invalid="ignore"):
+                    support += np.abs(zp[centre + dv * (W + 2) + du] - zc) <= tc
+    flying = isolated & valid
+    flying.reshape(-1)[idx[support <= max_support]] = True
+    # a pixel between two surfaces with no same-surface neighbour at all is isolated too
+    return flying
 
 
 def denoise_depth(depth_m: np.ndarray, tol_rel: float = 0.01, size: int = 3, min_support: int = 6,

@@ -13,7 +13,7 @@ the uncertainty mesh's curtains) whose ends are visible from the source (a segme
 source centre to the end meets no object surface more than ``occlusion_tol_m`` before it).
 They are projected through the source's distortion model and drawn into a mask of the source
 image; the distance of every P1 point's projection to the nearest drawn silhouette (Euclidean
-distance transform, exact to about half a source pixel: lines are drawn on the pixel grid) is
+distance transform with a 5 x 5 mask, within about half a source pixel: lines are drawn on the pixel grid) is
 compared with the radius
 
     r = ``mixed_radius_px`` (default 1: the pixel's own half width plus the half pixel that
@@ -92,7 +92,7 @@ def silhouette_distance(cam: Camera, top_vertices: np.ndarray, edges: np.ndarray
     ends = ends[~far].astype(np.int32)
     mask = np.full((h, w), 255, dtype=np.uint8)
     cv2.polylines(mask, list(ends.reshape(-1, 2, 1, 2)), False, 0, 1, cv2.LINE_8, shift)
-    dist = cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    dist = cv2.distanceTransform(mask, cv2.DIST_L2, 5)  # 5x5 chamfer: ~2 % off, 4x faster than exact
     q = np.rint(uv[fin] - lo).astype(np.int64)
     inside = (q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < h)
     d = np.full(len(q), np.inf, dtype=np.float32)
