@@ -1,7 +1,7 @@
 """``plantreg register``: register every camera of a recording into one target camera's view.
 
     plantreg register --rig RIG --recording DIR --target NAME --out OUT
-                      [--edge-angle DEG] [--overwrite] [--quiet]
+                      [--edge-angle DEG] [--outputs PARTS] [--tiff-codec C] [--overwrite] [--quiet]
                       [--no-flying-filter | --remove-flying] [--flying-jump REL]
                       [--no-denoise] [--denoise-size N] [--mixed-radius PX] [--drop-mixed]
 
@@ -13,6 +13,7 @@ Progress goes to stderr (``--quiet`` silences it); the summary goes to stdout.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -46,21 +47,32 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                      help="a depth jump between neighbours counts above REL x depth (default 0.01: 1 cm at 1 m)")
     tof.add_argument("--no-denoise", action="store_true", help="no edge-preserving depth denoising")
     tof.add_argument("--denoise-size", type=int, default=None, metavar="N",
-                     help="window of the same-surface plane fit, depth pixels, odd (default 5)")
+                     help="window of the same-surface plane fit, depth pixels, odd (default 3)")
     tof.add_argument("--mixed-radius", type=float, default=None, metavar="PX",
                      help="mixed-pixel flag: source pixels around a silhouette, before adding 2 x the "
                           "camera's blur_px (default 1)")
     tof.add_argument("--drop-mixed", action="store_true",
                      help="write NaN instead of the registered value where a pixel is flagged mixed")
+    add_output_options(p)
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(run=run)
     return p
 
 
+def add_output_options(p: argparse.ArgumentParser) -> None:
+    """The output options ``plantreg register`` and ``plantreg batch`` share."""
+    p.add_argument("--outputs", default=None, metavar="PARTS",
+                   help="comma-separated parts of the output to write: registered,cases,areas,ply,previews,"
+                   "mosaic,summary (default: all)")
+    p.add_argument("--tiff-codec", default="deflate-fp", choices=("deflate-fp", "deflate", "zstd"),
+                   help="lossless compression of the registered TIFFs (default deflate-fp: deflate with the "
+                   "floating-point predictor; zstd is faster but not read by ImageJ/Fiji)")
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import cli
-    from ..core.export import check_output_spares_inputs, write_outputs
+    from ..core.export import check_output_spares_inputs, parse_outputs, write_outputs
     from ..core.recording import Recording
     from ..core.register import AREA_P4, AREA_P5, AREA_P6, Registrar, RegistrationParams
     from ..core.rig import Rig
@@ -75,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"{e.detail}; registration needs a depth camera", rig_path) from None
     if args.target not in rig.names:
         raise InputError(f"unknown target camera '{args.target}'; the rig has {', '.join(rig.names)}", rig_path)
+    what = parse_outputs(args.outputs)
     params = RegistrationParams()
     if args.edge_angle is not None:
         if not 0.0 < args.edge_angle < 90.0:
@@ -98,13 +111,16 @@ def run(args: argparse.Namespace) -> int:
     result = Registrar(rig, recording, params).register(args.target, progress.sub(0.0, 0.85))
     if args.drop_mixed:
         drop_mixed(result)
-    write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0),
+    write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0), what=what,
+                  tiff_codec=args.tiff_codec,
                   inputs={"rig": rig_path.resolve(), "recording": Path(args.recording).resolve(),
                           "command": _command_line(args)})
 
     H, W = result.shape
     n = H * W
     print(f"registered into '{result.target}' ({W}x{H}); wrote {out}")
+    for w in result.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     for cam, counts in result.case_counts().items():
         # P1, P2, P3.1, P3.2, P5, P6 background, outside the source: % of all target pixels
         parts = [f"{_SHORT[c]} {100.0 * counts.get(c, 0) / n:5.1f}%" for c in (1, 2, 3, 4, 5, 0, 6)]
@@ -145,10 +161,19 @@ def _tof_params(args: argparse.Namespace, params) -> None:
 
 
 def drop_mixed(result) -> None:
-    """NaN for the registered values of pixels flagged mixed (per source), in place."""
+    """NaN for the registered values of pixels flagged mixed (per source), in place (plain arrays
+    and :class:`~plantreg_gui.core.hits.HitImage` alike)."""
+    from ..core.hits import HitImage
+
     for cam, m in result.mixed.items():
-        if cam in result.registered and np.any(m):
-            result.registered[cam][np.asarray(m, dtype=bool)] = np.nan
+        if cam not in result.registered or not np.any(m):
+            continue
+        img = result.registered[cam]
+        flagged = np.asarray(m, dtype=bool)
+        if isinstance(img, HitImage):
+            img.values[flagged.reshape(-1)[img.index]] = np.nan
+        else:
+            img[flagged] = np.nan
 
 
 _SHORT = {0: "P6", 1: "P1", 2: "P2", 3: "P3.1", 4: "P3.2", 5: "P5", 6: "outside"}
@@ -165,6 +190,10 @@ def _command_line(args: argparse.Namespace) -> str:
     for opt in ("flying_jump", "denoise_size", "mixed_radius"):
         if getattr(args, opt, None) is not None:
             parts += ["--" + opt.replace("_", "-"), f"{getattr(args, opt):g}"]
+    if args.outputs is not None:
+        parts += ["--outputs", args.outputs]
+    if args.tiff_codec != "deflate-fp":
+        parts += ["--tiff-codec", args.tiff_codec]
     if args.overwrite:
         parts.append("--overwrite")
     return " ".join(parts)
