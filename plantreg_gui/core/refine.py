@@ -77,6 +77,7 @@ class RefineParams:
     bins: int = 24                      # histogram bins per axis
     max_points: int = 15000             # per recording at the finest level
     min_points: int = 3000              # per recording at the coarsest level
+    candidates: int = 8                 # depth points considered per recording, in multiples of max_points
     bound_units: float = 5.0            # search box per level, +- blur widths
     depth_jump_m: float = 0.01          # a 3x3 depth range above max(this, 1.5 % of depth) = mixed pixel
     occlusion_tol_m: float = 0.002      # as RegistrationParams.occlusion_tol_m
@@ -89,8 +90,9 @@ class RefineParams:
     fd_step: float = 0.1                # lbfgs: finite-difference step, blur widths
     #: converged only if the chance NID minus the result's NID is at least this
     min_information: float = 0.01
-    #: ... and moving the pose by ``probe_px`` raises the NID by at least this fraction of it
-    min_contrast: float = 0.15
+    #: ... and moving the image by ``probe_px`` either way in x and y raises the NID by at least this
+    #: fraction of that information (measured on the demo: 0.03 thermal, whose image is smooth, to 0.2)
+    min_contrast: float = 0.01
     probe_px: float = 3.0
     #: landmark disagreement (median px) above which a warning is given
     landmark_warn_px: float = 3.0
@@ -201,14 +203,14 @@ def _single_channel(img: np.ndarray) -> np.ndarray:
         H, W, C = a.shape
         flat = a.reshape(H * W, C)
         rng = np.random.default_rng(0)
-        sub = flat[rng.choice(H * W, size=min(H * W, 20000), replace=False)].astype(np.float64)
+        sub = flat[rng.choice(H * W, size=min(H * W, 5000), replace=False)].astype(np.float64)
         sub = sub[np.isfinite(sub).all(axis=1)]
         if len(sub) < 10:
             out = np.nanmean(a.astype(np.float32), axis=2)
         else:
             mu = sub.mean(axis=0)
-            _u, _s, vt = np.linalg.svd(sub - mu, full_matrices=False)
-            w = vt[0].astype(np.float32)
+            evals, evecs = np.linalg.eigh(np.cov(sub - mu, rowvar=False))  # C x C: cheap for 200 bands
+            w = evecs[:, -1].astype(np.float32)
             out = np.zeros((H, W), np.float32)
             for b0 in range(0, C, 16):  # band blocks: no float64 copy of a large cube
                 blk = np.nan_to_num(a[:, :, b0:b0 + 16].astype(np.float32) - mu[b0:b0 + 16].astype(np.float32))
@@ -261,15 +263,24 @@ class _RecData:
 
 
 @dataclass
-class _LevelRec:
-    """One recording at one level for one camera: the fixed point set and binning."""
+class _Level:
+    """All recordings at one level for one camera: fixed point sets and binning, concatenated
+    so that one evaluation is a handful of numpy calls however many recordings there are."""
 
-    X: np.ndarray            # (n, 3) float64 rig points
-    ref_bin: np.ndarray      # (n,) int64 reference bin
-    n_ref_bins: int
-    img: np.ndarray          # (h, w) float32 blurred source image mapped to bin positions [0, bins - 1]
+    X: np.ndarray            # (n, 3) float64 rig points of every recording
+    rec: np.ndarray          # (n,) int64 recording slot of each point (0 .. R-1)
+    cell: np.ndarray         # (n,) int64 (rec * bins + reference bin) * bins: histogram row start
+    voff: np.ndarray         # (n,) float64 row offset of the point's recording in ``atlas``
+    atlas: np.ndarray        # (R * h, w) float32 blurred source images mapped to bin positions [0, bins - 1]
+    h: int                   # height of one source image
     taper: float             # px: weight ramps from 0 at the image border to 1 this far inside
-    weight: np.ndarray       # (n,) float64 point weights: object (ROI) and background points weigh the same in total
+    weight: np.ndarray       # (n,) float64: object (ROI) and background points weigh the same per recording
+    n_rec: int
+    bins: int
+    rec_index: list[int]     # slot -> index into the caller's recordings
+
+    def __len__(self) -> int:
+        return len(self.X)
 
 
 def _prepare_recording(rig: Rig, rec: Recording, rays_cam: np.ndarray, p: RefineParams,
@@ -286,7 +297,7 @@ def _prepare_recording(rig: Rig, rec: Recording, rays_cam: np.ndarray, p: Refine
     with np.errstate(invalid="ignore"):
         ok = np.isfinite(depth) & ((hi - lo) <= np.maximum(p.depth_jump_m, 0.015 * depth))
     pix = np.flatnonzero(ok.ravel())
-    pix = pix[rng.permutation(len(pix))]
+    pix = pix[rng.permutation(len(pix))][: p.candidates * p.max_points]
     X_cam = rays_cam[pix] * depth.ravel()[pix, None].astype(np.float64)
     X_rig = dcam.to_rig(X_cam).astype(np.float32)
     if rig.depth_camera in rec.images:
@@ -345,47 +356,45 @@ def _project(cam: Camera, X: np.ndarray) -> np.ndarray:
     return np.stack([K[0, 0] * xd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=1)
 
 
-def _nid_terms(lv: _LevelRec, cam: Camera, bins: int, ref_bin: np.ndarray | None = None) -> tuple[float, float]:
+def _nid_per_recording(lv: _Level, cam: Camera, cell: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """NID (R,) of each recording slot and its total weight (R,) for camera ``cam``."""
+    B = lv.bins
     uv = _project(cam, lv.X)
+    w_img = lv.atlas.shape[1]
     # points count fully inside the image and fade out over ``lv.taper`` px towards its border:
     # the overlap changes smoothly, and points outside carry no (clamped, made-up) values
-    h_img, w_img = lv.img.shape
     with np.errstate(invalid="ignore"):
         inside = np.minimum(np.minimum(uv[:, 0] + 0.5, w_img - 0.5 - uv[:, 0]),
-                            np.minimum(uv[:, 1] + 0.5, h_img - 0.5 - uv[:, 1]))
+                            np.minimum(uv[:, 1] + 0.5, lv.h - 0.5 - uv[:, 1]))
         wt = np.clip(inside / lv.taper, 0.0, 1.0) * lv.weight
-    q = _bilinear(lv.img, uv)  # the image already holds bin positions (see _level_data)
-    i0 = np.minimum(q.astype(np.int64), bins - 2)
+    u = np.clip(uv[:, 0], 0, w_img - 1.0001)
+    v = np.clip(uv[:, 1], 0, lv.h - 1.0001) + lv.voff
+    q = _bilinear(lv.atlas, np.stack([u, v], axis=1))  # the atlas holds bin positions (see _level_data)
+    i0 = np.minimum(q.astype(np.int64), B - 2)
     fr = q - i0
-    rb = lv.ref_bin if ref_bin is None else ref_bin
-    base = rb * bins + i0
-    n_cells = lv.n_ref_bins * bins
+    base = (lv.cell if cell is None else cell) + i0
+    n_cells = lv.n_rec * B * B
     h = (np.bincount(base, weights=wt * (1.0 - fr), minlength=n_cells)
-         + np.bincount(base + 1, weights=wt * fr, minlength=n_cells))
-    h = h.reshape(lv.n_ref_bins, bins)
-    tot = h.sum()
-    if tot <= 0:
-        return 1.0, 0
-    P = h / tot
+         + np.bincount(base + 1, weights=wt * fr, minlength=n_cells)).reshape(lv.n_rec, B, B)
+    tot = h.sum(axis=(1, 2))
+    P = h / np.maximum(tot, 1e-12)[:, None, None]
 
-    def ent(x: np.ndarray) -> float:
-        x = x[x > 0]
-        return float(-(x * np.log(x)).sum())
+    def ent(x: np.ndarray) -> np.ndarray:  # entropy over all but the first axis
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(x > 0, x * np.log(x), 0.0)
+        return -t.reshape(len(x), -1).sum(axis=1)
 
-    hxy = ent(P.ravel())
-    mi = ent(P.sum(axis=1)) + ent(P.sum(axis=0)) - hxy
-    return (1.0 - mi / hxy if hxy > 0 else 1.0), float(tot)
+    hxy = ent(P)
+    mi = ent(P.sum(axis=2)) + ent(P.sum(axis=1)) - hxy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nid = np.where(hxy > 0, 1.0 - mi / hxy, 1.0)
+    return nid, tot
 
 
-def _cost(levels: Sequence[_LevelRec], cam: Camera, bins: int) -> tuple[float, list[float]]:
-    """Point-weighted mean NID over the recordings, and the NID of each."""
-    vals, ns = [], []
-    for lv in levels:
-        c, n = _nid_terms(lv, cam, bins)
-        vals.append(c)
-        ns.append(n)
-    w = np.asarray(ns, dtype=np.float64)
-    return (float(np.dot(w, vals) / w.sum()) if w.sum() else 1.0), vals
+def _cost(lv: _Level, cam: Camera) -> tuple[float, list[float]]:
+    """Weighted mean NID over the recordings, and the NID of each."""
+    nid, tot = _nid_per_recording(lv, cam)
+    return (float(np.dot(tot, nid) / tot.sum()) if tot.sum() > 0 else 1.0), [float(x) for x in nid]
 
 
 # ---------------------------------------------------------------------------- parametrisation
@@ -449,6 +458,7 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
     p = params or RefineParams()
     progress = ensure_reporter(progress)
     t_start = time.perf_counter()
+    cpu_start = time.process_time()
     dcam = rig.depth()
     if not recordings:
         raise InputError("refinement needs at least one recording")
@@ -500,6 +510,7 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
         report["cameras"][name] = entry
         warnings.extend(warn)
     report["seconds"] = round(time.perf_counter() - t_start, 2)
+    report["cpu_seconds"] = round(time.process_time() - cpu_start, 2)  # all threads of this process
     calib = dict(out_rig.extra.get("calibration", {})) if isinstance(out_rig.extra.get("calibration"), dict) else {}
     calib["refinement"] = {k: v for k, v in report.items() if k != "params"}
     out_rig.extra["calibration"] = calib
@@ -530,7 +541,12 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
     evals = 0
     levels_out = []
     warn: list[str] = []
-    lv_recs: list[_LevelRec] = []
+    lv: _Level | None = None
+    with progress.stage(f"{name}: visibility"):
+        # computed once at the start pose, for the union of centres within visibility_radius_m
+        visible = {i: _visible(cam0, d, np.arange(min(len(d.X_rig), p.candidates * p.max_points)),
+                               p.occlusion_tol_m, p.visibility_radius_m)
+                   for i, d in enumerate(data) if i in src_imgs}
     res = None
     par = None
     for li, deg in enumerate(p.levels_deg):
@@ -538,8 +554,8 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
         ang = np.radians(deg)
         sig_src = max(p.min_sigma_px, f_src * ang)
         sig_ref = max(0.0, f_ref * ang)
-        lv_recs, zs = _level_data(cam, dcam, data, src_imgs, sig_src, sig_ref, p, p.bound_units * sig_src, roi)
-        if not lv_recs:
+        lv, zs = _level_data(cam, dcam, data, src_imgs, sig_src, sig_ref, p, p.bound_units * sig_src, roi, visible)
+        if lv is None:
             warn.append(f"{name}: no depth point is visible in this camera at the start pose; not refined")
             return {"converged": False, "reason": "no visible depth points"}, cam0, warn
         par = _Param(cam, sig_src, float(np.median(zs)), focal)
@@ -557,7 +573,7 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
             v[active] = x
             return v
 
-        fun = _counted(lambda x: _cost(lv_recs, par.camera(full(x)), p.bins)[0], progress)
+        fun = _counted(lambda x, lv=lv, par=par: _cost(lv, par.camera(full(x)))[0], progress)
         c0 = fun(np.zeros(len(active)))
         last = li == len(p.levels_deg) - 1
         bounds = [(-lim[k], lim[k]) for k in active]
@@ -571,24 +587,26 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
         on_bound = bool(np.any(np.abs(res.x) > 0.98 * lim[active]))
         res.x = full(res.x)
         cam = par.camera(res.x)
-        levels_out.append({"blur_deg": deg, "sigma_px": round(sig_src, 2), "points": int(sum(len(l.X) for l in lv_recs)),
+        levels_out.append({"blur_deg": deg, "sigma_px": round(sig_src, 2), "points": len(lv),
                            "start_cost": round(c0, 5), "end_cost": round(float(res.fun), 5),
                            "step_px": round(float(np.max(np.abs(res.x))) * sig_src, 3), "evaluations": fun.n,
                            "success": bool(res.success)})
     assert res is not None and par is not None
     # convergence tests on the finest level's point set
-    end_cost, end_per = _cost(lv_recs, cam, p.bins)
-    start_cost, start_per = _cost(lv_recs, cam0, p.bins)
-    chance = []
+    assert lv is not None
+    end_cost, end_per = _cost(lv, cam)
+    start_cost, start_per = _cost(lv, cam0)
     rng = np.random.default_rng(p.seed + 1)
-    for lv in lv_recs:
-        chance.append(_nid_terms(lv, cam, p.bins, ref_bin=rng.permutation(lv.ref_bin))[0])
-    w = np.array([_nid_terms(lv, cam, p.bins)[1] for lv in lv_recs])
-    chance_cost = float(np.dot(w, chance) / w.sum())
+    shuffled = lv.cell.copy()
+    for r in range(lv.n_rec):  # reference bins shuffled within each recording: the NID of chance
+        sel = np.flatnonzero(lv.rec == r)
+        shuffled[sel] = lv.cell[rng.permutation(sel)]
+    nid_c, tot_c = _nid_per_recording(lv, cam, shuffled)
+    chance_cost = float(np.dot(tot_c, nid_c) / tot_c.sum())
     information = chance_cost - end_cost
     probe = _Param(cam, p.probe_px, par.zm, False)
-    shifted = [_cost(lv_recs, probe.camera(np.eye(6)[k] * sgn), p.bins)[0] for k in (0, 1) for sgn in (-1, 1)]
-    contrast = (min(shifted) - end_cost) / max(information, 1e-9)
+    shifted = [_cost(lv, probe.camera(np.eye(6)[k] * sgn))[0] for k in (0, 1) for sgn in (-1, 1)]
+    contrast = (min(shifted) - end_cost) / max(information, 1e-3)
     converged = bool(res.success) and not on_bound and information >= p.min_information and contrast >= p.min_contrast
     if not converged:
         why = []
@@ -611,7 +629,8 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
     entry = {
         "start_cost": round(start_cost, 5), "end_cost": round(end_cost, 5), "chance_cost": round(chance_cost, 5),
         "information": round(information, 5), "contrast": round(float(contrast), 4),
-        "cost_per_recording": [{"start": round(a, 5), "end": round(b_, 5)} for a, b_ in zip(start_per, end_per)],
+        "cost_per_recording": {str(lv.rec_index[k]): {"start": round(a, 5), "end": round(b_, 5)}
+                               for k, (a, b_) in enumerate(zip(start_per, end_per))},
         "iterations": evals, "converged": converged, "change": change, "levels": levels_out,
     }
     entry["kept"] = "refined" if converged else "start"
@@ -652,45 +671,52 @@ class _counted:
 
 def _level_data(cam: Camera, dcam: Camera, data: Sequence[_RecData], src_imgs: dict[int, np.ndarray],
                 sig_src: float, sig_ref: float, p: RefineParams, reach_px: float,
-                roi: tuple[np.ndarray, np.ndarray]) -> tuple[list[_LevelRec], np.ndarray]:
-    """Fixed point sets and binning of one level at the level's start pose."""
-    out: list[_LevelRec] = []
-    zs = []
+                roi: tuple[np.ndarray, np.ndarray], visible: dict[int, np.ndarray]) -> tuple[_Level | None, np.ndarray]:
+    """Fixed point sets and binning of one level at the level's start pose; ``visible[i]`` (M_i,)
+    bool marks the recording's candidate points the source sees (see :func:`_visible`)."""
     taper = 2.0 * sig_src + 1.0
     margin = -reach_px  # points that may come into view during this level are kept (with weight 0 outside)
     area = dcam.width * dcam.height
     n_want = int(np.clip(area / max(0.5 * sig_ref, 1.0) ** 2, p.min_points, p.max_points))
+    nb = p.bins
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in ("X", "rec", "cell", "voff", "weight", "z")}
+    atlas, slots = [], []
     for i, d in enumerate(data):
         if i not in src_imgs:
             continue
-        # candidates: the first points of the random order that land in the image with a margin
-        take = d.X_rig[: min(len(d.X_rig), 4 * n_want)]
-        uv, z = project_points(cam, take)
-        inside = cam.in_image(uv, margin) & (z > 0)
-        idx = np.flatnonzero(inside)
-        if len(idx) == 0:
-            continue
-        vis = _visible(cam, d, idx, p.occlusion_tol_m, p.visibility_radius_m)
-        idx = idx[vis][:n_want]
+        cand = np.flatnonzero(visible[i])
+        uv, z = project_points(cam, d.X_rig[cand])
+        idx = cand[cam.in_image(uv, margin) & (z > 0)][:n_want]
         if len(idx) < 200:
             continue
+        uv, z = project_points(cam, d.X_rig[idx])
+        slot = len(slots)
         img = _blur(src_imgs[i], sig_src)
         ref = _blur(d.ref, sig_ref).ravel()[d.pix[idx]]
-        nb = p.bins
         redges = np.unique(np.quantile(ref, np.linspace(0, 1, nb + 1)[1:-1]))
         ref_bin = np.searchsorted(redges, ref, side="right").astype(np.int64)
-        seen = uv[idx][cam.in_image(uv[idx])]
-        s = _bilinear(img, seen if len(seen) >= 100 else uv[idx])
+        seen = uv[cam.in_image(uv)]
+        s = _bilinear(img, seen if len(seen) >= 100 else uv)
         knots = _increasing(np.quantile(s, np.linspace(0, 1, nb + 1)))
         # map the image to continuous bin positions once (equal-population bins of the values the
         # points see), instead of mapping every sample in every evaluation
-        img = np.interp(img, knots, np.linspace(0, nb - 1, nb + 1)).astype(np.float32)
-        X = take[idx].astype(np.float64)
+        atlas.append(np.interp(img, knots, np.linspace(0, nb - 1, nb + 1)).astype(np.float32))
+        X = d.X_rig[idx].astype(np.float64)
         obj = np.all((X >= roi[0]) & (X <= roi[1]), axis=1)
         weight = np.ones(len(X))
         if 0 < obj.sum() < len(X):  # the plant is usually a small part of the view: do not let the ground outvote it
             weight[obj] = 0.5 * len(X) / obj.sum()
             weight[~obj] = 0.5 * len(X) / (~obj).sum()
-        out.append(_LevelRec(X, ref_bin, len(redges) + 1, img, taper, weight))
-        zs.append(z[idx])
-    return out, (np.concatenate(zs) if zs else np.zeros(0))
+        parts["X"].append(X)
+        parts["rec"].append(np.full(len(X), slot))
+        parts["cell"].append((slot * nb + ref_bin) * nb)
+        parts["voff"].append(np.full(len(X), float(slot * cam.height)))
+        parts["weight"].append(weight)
+        parts["z"].append(z)
+        slots.append(i)
+    if not slots:
+        return None, np.zeros(0)
+    cat = {k: np.concatenate(v) for k, v in parts.items()}
+    lv = _Level(cat["X"], cat["rec"], cat["cell"], cat["voff"], np.ascontiguousarray(np.concatenate(atlas, axis=0)),
+                cam.height, taper, cat["weight"], len(slots), nb, slots)
+    return lv, cat["z"]
