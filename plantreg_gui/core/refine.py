@@ -75,7 +75,7 @@ class RefineParams:
     levels_deg: tuple[float, ...] = (1.6, 0.8, 0.4, 0.2, 0.0)
     min_sigma_px: float = 0.8
     bins: int = 24                      # histogram bins per axis
-    max_points: int = 15000             # per recording at the finest level
+    max_points: int = 6000             # per recording at the finest level
     min_points: int = 3000              # per recording at the coarsest level
     candidates: int = 8                 # depth points considered per recording, in multiples of max_points
     bound_units: float = 5.0            # search box per level, +- blur widths
@@ -85,9 +85,8 @@ class RefineParams:
     xtol: float = 0.05                  # Powell at the finest level, in blur widths (5x at coarser ones)
     max_translation_m: float = 0.05     # per level, bounds the translation search
     max_focal: float = 0.06             # per level, bounds the focal search (relative)
-    maxfev: int = 800                   # cost evaluations per level
-    optimizer: str = "powell"           # "powell" or "lbfgs"
-    fd_step: float = 0.1                # lbfgs: finite-difference step, blur widths
+    maxfev_per_param: int = 120         # Powell's evaluations per searched parameter and level
+    restarts: int = 2                   # Powell restarts when it runs out of evaluations
     #: converged only if the chance NID minus the result's NID is at least this
     min_information: float = 0.01
     #: ... and moving the image by ``probe_px`` either way in x and y raises the NID by at least this
@@ -577,12 +576,18 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
         c0 = fun(np.zeros(len(active)))
         last = li == len(p.levels_deg) - 1
         bounds = [(-lim[k], lim[k]) for k in active]
-        if p.optimizer == "powell":
-            res = minimize(fun, np.zeros(len(active)), method="Powell", bounds=bounds,
-                           options={"xtol": p.xtol if last else 5 * p.xtol, "ftol": 1e-6, "maxfev": p.maxfev})
-        else:  # quasi-Newton on central differences of a fraction of a blur width (the cost is smooth at that scale)
-            res = minimize(fun, np.zeros(len(active)), method="L-BFGS-B", bounds=bounds, jac="3-point",
-                           options={"eps": p.fd_step, "maxfun": p.maxfev, "ftol": 1e-9, "gtol": 1e-6})
+        opts = {"xtol": p.xtol if last else 5 * p.xtol, "ftol": 1e-6, "maxfev": p.maxfev_per_param * len(active)}
+        # Powell (derivative-free: finite-difference gradients of this cost were measured too noisy
+        # for L-BFGS at the finest level). When it runs out of evaluations, restart it from where it
+        # stopped (a fresh direction set); a restart that no longer moves counts as converged.
+        res = minimize(fun, np.zeros(len(active)), method="Powell", bounds=bounds, options=opts)
+        for _ in range(p.restarts):
+            if res.success:
+                break
+            again = minimize(fun, res.x, method="Powell", bounds=bounds, options=opts)
+            moved = float(np.max(np.abs(again.x - res.x)))
+            again.success = bool(again.success or moved < 0.1)
+            res = again
         evals += fun.n
         on_bound = bool(np.any(np.abs(res.x) > 0.98 * lim[active]))
         res.x = full(res.x)
