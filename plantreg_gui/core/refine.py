@@ -135,13 +135,16 @@ def landmark_source(landmarks: Any, recordings: Sequence[Recording]) -> Landmark
         recs = recs["recordings"]
     per_rec: list[list[Any]] = [[] for _ in recordings]
     if isinstance(recs, dict):
+        folder_of = getattr(landmarks, "folder", None)  # a LandmarkSet resolves its own keys
         for key, pts in recs.items():
+            if callable(folder_of):
+                key = str(folder_of(key).resolve())
             kparts = [p for p in str(key).replace("\\", "/").split("/") if p not in ("", ".")]
             for i, rec in enumerate(recordings):
                 if rec.folder is None:
                     continue
-                rparts = rec.folder.resolve().parts
-                if kparts and tuple(kparts) == tuple(rparts[-len(kparts):]):
+                rparts = [p for p in rec.folder.resolve().as_posix().split("/") if p]
+                if kparts and kparts == rparts[-len(kparts):]:
                     per_rec[i] = _points_of(pts)
     elif isinstance(recs, (list, tuple)):
         if len(recs) != len(recordings):
