@@ -1,9 +1,11 @@
 """Automatic refinement of a rig from its recordings (issue 8, item 2), against ground truth.
 
 The demo rig is disturbed by 3 degrees, 3 cm and 3 % focal length per source camera; the
-refinement sees three rendered demo plants and no landmarks; the refined rig then registers a
-fourth plant it never saw, and its error is measured against that plant's ground truth exactly as
-tests/test_register.py does. The plants (seeds 31-34) are not the ones the method was developed on.
+refinement sees six rendered demo plants (the issue's figure; with three, the thermal camera's
+focal length and distance were measured to trade off for some disturbances: 1.7 px) and no
+landmarks; the refined rig then registers a seventh plant it never saw, and its error is measured
+against that plant's ground truth exactly as tests/test_register.py does. Seeds 31-37 were not
+used while the method was developed.
 """
 
 from __future__ import annotations
@@ -21,8 +23,8 @@ from plantreg_gui.core.register import CASE_P1, Registrar
 from plantreg_gui.core.rig import Rig
 from plantreg_gui.core.synthetic import demo_rig, ground_truth, make_plant_scene, render_recording
 
-TRAIN_SEEDS = (31, 32, 33)
-TEST_SEED = 34
+TRAIN_SEEDS = (31, 32, 33, 34, 35, 36)
+TEST_SEED = 37
 
 
 def perturb_rig(rig: Rig, seed: int, deg: float = 3.0, metres: float = 0.03, focal: float = 0.03) -> Rig:
@@ -68,7 +70,8 @@ def plants():
     for seed in (*TRAIN_SEEDS, TEST_SEED):
         scene = make_plant_scene(seed)
         recs[seed] = render_recording(truth, scene, seed=seed, supersample=1)
-        gts[seed] = ground_truth(truth, scene, "ir")
+        if seed in (TEST_SEED, *TRAIN_SEEDS[:2]):  # the unseen plant, and landmarks on two others
+            gts[seed] = ground_truth(truth, scene, "ir")
     return truth, recs, gts
 
 
@@ -95,14 +98,17 @@ def test_refine_from_a_disturbed_rig_registers_an_unseen_plant(plants):
     assert all(np.median(before[s]) > 5 for s in sources), {s: np.median(e) for s, e in before.items()}
 
     # landmarks only check the result (the objective does not use them): one recording's worth
-    lms = [true_landmarks(gts[TRAIN_SEEDS[0]], sources), [], []]
+    lms = [true_landmarks(gts[TRAIN_SEEDS[0]], sources)] + [[]] * (len(TRAIN_SEEDS) - 1)
     res = refine_rig(start, [recs[s] for s in TRAIN_SEEDS], free=frozenset({"focal"}), landmarks=lms)
+    # the issue's "< 60 s on 2 cores" is for an idle machine (benchmarks/bench_refine.py); here only a
+    # gross bound on CPU time (not wall time: the test machine is shared), 5x the target
+    assert res.report["cpu_seconds"] < 300, res.report["cpu_seconds"]
 
     after = registration_errors(res.rig, recs[TEST_SEED], gts[TEST_SEED], truth)
     figures = {s: (float(np.median(e)), float(np.percentile(e, 90))) for s, e in after.items()}
     for s in sources:
         entry = res.report["cameras"][s]
-        assert entry["converged"], (s, entry)
+        assert entry["converged"], (s, res.warnings)
         assert figures[s][0] <= 1.0, figures   # the issue's figure: median <= 1.0 px
         assert len(after[s]) > 5000, s          # measured on a real share of the plant
         assert entry["end_cost"] < entry["start_cost"]
