@@ -20,10 +20,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from test_refine import perturb_rig, registration_errors  # noqa: E402  (one definition of both)
+from test_refine import registration_errors  # noqa: E402  (one definition)
 
 from plantreg_gui.core.refine import refine_rig  # noqa: E402
 from plantreg_gui.core.synthetic import demo_rig, ground_truth, make_plant_scene, render_recording  # noqa: E402
+from plantreg_gui.core.synthetic.landmarks import perturb_rig  # noqa: E402
 
 
 def main() -> None:
@@ -35,7 +36,7 @@ def main() -> None:
     scene = make_plant_scene(200)
     test_rec = render_recording(truth, scene, seed=200, supersample=1)
     gt = ground_truth(truth, scene, "ir")
-    start = perturb_rig(truth, seed=7)
+    start = perturb_rig(truth, np.random.default_rng(7))
     t0, c0 = time.perf_counter(), time.process_time()
     res = refine_rig(start, recs, free=frozenset({"focal"}))
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import copy
 
-import cv2
 import numpy as np
 import pytest
 
@@ -22,30 +21,10 @@ from plantreg_gui.core.refine import RefineParams, landmark_residuals, landmark_
 from plantreg_gui.core.register import CASE_P1, Registrar
 from plantreg_gui.core.rig import Rig
 from plantreg_gui.core.synthetic import demo_rig, ground_truth, make_plant_scene, render_recording
+from plantreg_gui.core.synthetic.landmarks import perturb_rig
 
 TRAIN_SEEDS = (31, 32, 33, 34, 35, 36)
 TEST_SEED = 37
-
-
-def perturb_rig(rig: Rig, seed: int, deg: float = 3.0, metres: float = 0.03, focal: float = 0.03) -> Rig:
-    """Every camera but the depth camera rotated by ``deg`` about a random axis, its centre moved
-    by ``metres`` in a random direction, its focal length scaled by 1 +- ``focal``."""
-    rng = np.random.default_rng(seed)
-    out = copy.deepcopy(rig)
-    for c in out.cameras:
-        if c.name == out.depth_camera:
-            continue
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        step = rng.normal(size=3)
-        step /= np.linalg.norm(step)
-        centre = c.center_rig + metres * step
-        c.R_cam_rig = cv2.Rodrigues(axis * np.radians(deg))[0] @ c.R_cam_rig
-        c.t_cam_rig = -c.R_cam_rig @ centre
-        K = c.K.copy()
-        K[:2, :2] *= 1 + focal * rng.choice([-1, 1])
-        c.K = K
-    return out
 
 
 def registration_errors(rig: Rig, rec: Recording, gt, truth: Rig) -> dict[str, np.ndarray]:
@@ -92,7 +71,7 @@ def true_landmarks(gt, sources, n: int = 15, offset_px: float = 0.0, seed: int =
 @pytest.mark.slow
 def test_refine_from_a_disturbed_rig_registers_an_unseen_plant(plants):
     truth, recs, gts = plants
-    start = perturb_rig(truth, seed=3)
+    start = perturb_rig(truth, np.random.default_rng(3))
     sources = ["rgb", "thermal", "hyperspectral"]
     before = registration_errors(start, recs[TEST_SEED], gts[TEST_SEED], truth)
     assert all(np.median(before[s]) > 5 for s in sources), {s: np.median(e) for s, e in before.items()}
@@ -129,7 +108,7 @@ def test_refine_from_a_disturbed_rig_registers_an_unseen_plant(plants):
 @pytest.mark.slow
 def test_uniform_noise_camera_is_not_reported_converged(plants):
     truth, recs, _gts = plants
-    start = perturb_rig(truth, seed=4)
+    start = perturb_rig(truth, np.random.default_rng(4))
     rng = np.random.default_rng(9)
     rec = copy.copy(recs[TRAIN_SEEDS[0]])
     rec.images = dict(rec.images)
@@ -192,3 +171,37 @@ def test_landmark_adapter_matches_recordings_by_folder(tmp_path, plants):
     # through the true rig and the recording's mesh the true landmarks land where they should
     d = landmark_residuals(truth, [other, rec], src, "thermal")
     assert len(d) == 5 and np.median(d) < 0.5, d
+
+
+# ---------------------------------------------------------------------------- command line
+@pytest.mark.slow
+def test_fit_rig_refine_from_the_images_alone(tmp_path, plants, capsys):
+    """`plantreg fit-rig --refine` with a landmarks file without points: the rig is refined from
+    the images of the recordings alone, written with provenance, and registers the plants."""
+    import json
+
+    from plantreg_gui import cli
+
+    truth, recs, gts = plants
+    seeds = TRAIN_SEEDS[:2]
+    for s in seeds:
+        recs[s].save(tmp_path / "recordings" / f"plant{s}")
+    doc = {"format": "plantreg.landmarks", "version": 1,
+           "recordings": {f"recordings/plant{s}": {"points": []} for s in seeds}}
+    (tmp_path / "landmarks.json").write_text(json.dumps(doc))
+    start = perturb_rig(truth, np.random.default_rng(5), rotation_deg=1.0, position_m=0.01, focal_rel=0.0)
+    start.save(tmp_path / "start.json")
+    out = tmp_path / "refined.json"
+    code = cli.main(["fit-rig", "--rig", str(tmp_path / "start.json"), "--landmarks", str(tmp_path / "landmarks.json"),
+                     "--out", str(out), "--refine", "--quiet"])
+    _stdout, err = capsys.readouterr()
+    assert code == 0, err
+    rig = Rig.load(out)
+    cal = rig.extra["calibration"]
+    assert cal["method"] == "refine"
+    cams = cal["refine"]["cameras"]
+    assert set(cams) == {"rgb", "thermal", "hyperspectral"}
+    assert all(c["converged"] for c in cams.values()), err
+    rec = Recording.load(tmp_path / "recordings" / f"plant{seeds[0]}", rig)
+    errors = registration_errors(rig, rec, gts[seeds[0]], truth)
+    assert all(np.median(e) <= 1.0 for e in errors.values()), {k: np.median(e) for k, e in errors.items()}

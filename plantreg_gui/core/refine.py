@@ -448,8 +448,8 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
     ``cameras`` (default: all but the depth camera) from ``recordings`` of this rig, jointly.
 
     ``landmarks``: optional, only to *check* the result (not used by the objective); anything
-    :func:`landmark_source` accepts. ``free`` names other than ``"focal"`` are ignored with a
-    warning (the landmark fit frees principal point and distortion; images do not constrain them
+    :func:`landmark_source` accepts. ``free``: ``"focal"`` (every refined camera) or
+    ``"CAMERA:focal"``, as the landmark fit takes them; other items are kept fixed with a warning (the landmark fit frees principal point and distortion; images do not constrain them
     well). Returns a :class:`RefineResult`; ``report["cameras"][name]`` holds ``start_cost``,
     ``end_cost`` (NID, 0 = perfect dependence, 1 = none), ``cost_per_recording`` (start, end),
     ``iterations`` (cost evaluations), ``converged``, ``information`` and ``contrast`` (the
@@ -470,10 +470,14 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
         if n == dcam.name:
             raise InputError(f"camera '{n}' is the depth camera: its pose defines the rig frame and is not refined")
     warnings: list[str] = []
-    unknown = sorted(set(free) - REFINABLE)
-    if unknown:
-        warnings.append(f"refinement keeps {', '.join(unknown)} fixed (images refine only the pose and the focal length)")
-    focal = "focal" in free
+    # ``free`` items as the landmark fit takes them: "focal" (every camera) or "CAMERA:focal"
+    kept = sorted({it for it in free if it.split(":", 1)[-1] not in REFINABLE
+                   and (":" not in it or it.split(":", 1)[0] in names)})
+    if kept:
+        warnings.append(f"refinement keeps {', '.join(kept)} fixed (images refine only the pose and the focal length)")
+
+    def focal_free(name: str) -> bool:
+        return any(f in free for f in ("focal", f"{name}:focal"))
     for rec in recordings:
         rec.check(rig)
     out_rig = copy.deepcopy(rig)
@@ -488,7 +492,7 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
             data.append(_prepare_recording(rig, rec, rays_cam, p, rng))
 
     report: dict[str, Any] = {"method": "NID of depth-camera image vs source image over depth points",
-                              "free": sorted(set(free) & REFINABLE), "recordings": len(recordings),
+                              "free": sorted(free), "recordings": len(recordings),
                               "params": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(p).items()},
                               "cameras": {}}
     todo = [n for n in names if any(n in r.images for r in recordings)]
@@ -498,7 +502,8 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
     for ci, name in enumerate(todo):
         sub = progress.sub(0.1 + 0.9 * ci / len(todo), 0.1 + 0.9 * (ci + 1) / len(todo))
         cam0 = out_rig.camera(name)
-        entry, cam_new, warn = _refine_camera(rig, cam0, dcam, recordings, data, p, focal, sub)
+        entry, cam_new, warn = _refine_camera(rig, cam0, dcam, recordings, data, p, focal_free(name), sub)
+        entry["focal_free"] = focal_free(name)
         if lm is not None:
             before = landmark_residuals(rig, recordings, lm, name)
             tmp = copy.deepcopy(out_rig)
