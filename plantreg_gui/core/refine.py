@@ -95,6 +95,8 @@ class RefineParams:
     probe_px: float = 3.0
     #: landmark disagreement (median px) above which a warning is given
     landmark_warn_px: float = 3.0
+    #: ... and if the landmarks agreed better with the start pose, keep the start pose
+    keep_if_landmarks_disagree: bool = True
     seed: int = 0
 
 
@@ -511,8 +513,14 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
             after = landmark_residuals(tmp, recordings, lm, name)
             entry["landmarks_px"] = {"before": _stats(before), "after": _stats(after)}
             if len(after) and np.median(after) > p.landmark_warn_px:
+                worse = len(before) > 0 and np.median(after) > np.median(before)
+                if worse and p.keep_if_landmarks_disagree:
+                    # hand-read landmarks (1-4 px) outrank a similarity that moved away from them
+                    cam_new = cam0
+                    entry["kept"] = "start (landmarks disagree)"
                 warn.append(f"{name}: refined pose disagrees with the landmarks by {np.median(after):.1f} px median "
-                            f"({len(after)} landmarks; {np.median(before):.1f} px before)")
+                            f"({len(after)} landmarks; {np.median(before):.1f} px before)"
+                            + ("; the start pose is kept" if entry.get("kept") == "start (landmarks disagree)" else ""))
         _replace(out_rig, cam_new)
         report["cameras"][name] = entry
         warnings.extend(warn)
