@@ -451,12 +451,14 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
 
     ``landmarks``: optional, only to *check* the result (not used by the objective); anything
     :func:`landmark_source` accepts. ``free``: ``"focal"`` (every refined camera) or
-    ``"CAMERA:focal"``, as the landmark fit takes them; other items are kept fixed with a warning (the landmark fit frees principal point and distortion; images do not constrain them
-    well). Returns a :class:`RefineResult`; ``report["cameras"][name]`` holds ``start_cost``,
+    ``"CAMERA:focal"``, as the landmark fit takes them; other items are kept fixed with a warning
+    (images constrain principal point and distortion poorly; the landmark fit frees them). Returns a :class:`RefineResult`; ``report["cameras"][name]`` holds ``start_cost``,
     ``end_cost`` (NID, 0 = perfect dependence, 1 = none), ``cost_per_recording`` (start, end),
-    ``iterations`` (cost evaluations), ``converged``, ``information`` and ``contrast`` (the
-    convergence tests), ``change`` (``rotation_deg``, ``translation_mm``, ``focal_pct``), and
-    with landmarks ``landmarks_px`` (median / p90 / n before and after).
+    ``iterations`` (cost evaluations), ``converged``, ``kept`` (``"refined"`` or why the start pose
+    was kept), ``information`` and ``contrast`` (the convergence tests), ``change``
+    (``rotation_deg``, ``translation_mm``, ``focal_pct``), ``levels``, and with landmarks
+    ``landmarks_px`` (median / p90 / n before and after). The refined rig carries the report
+    (without ``params``) under ``extra["calibration"]["refine"]``.
     Raises :class:`InputError` for an unusable request (no depth camera, unknown camera, no recording).
     """
     p = params or RefineParams()
@@ -480,6 +482,7 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
 
     def focal_free(name: str) -> bool:
         return any(f in free for f in ("focal", f"{name}:focal"))
+
     for rec in recordings:
         rec.check(rig)
     out_rig = copy.deepcopy(rig)
@@ -527,7 +530,7 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
     report["seconds"] = round(time.perf_counter() - t_start, 2)
     report["cpu_seconds"] = round(time.process_time() - cpu_start, 2)  # all threads of this process
     calib = dict(out_rig.extra.get("calibration", {})) if isinstance(out_rig.extra.get("calibration"), dict) else {}
-    calib["refinement"] = {k: v for k, v in report.items() if k != "params"}
+    calib["refine"] = {k: v for k, v in report.items() if k != "params"}
     out_rig.extra["calibration"] = calib
     progress(1.0, "refinement done")
     return RefineResult(out_rig, report, warnings)
