@@ -12,7 +12,7 @@ import time
 from .. import __version__
 from ..core.errors import Cancelled, PlantregError
 
-SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "recording")  # modules NAME_cmd
+SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "recording", "batch")  # modules NAME_cmd
 
 
 class StderrProgress:

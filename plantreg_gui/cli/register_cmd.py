@@ -1,7 +1,7 @@
 """``plantreg register``: register every camera of a recording into one target camera's view.
 
     plantreg register --rig RIG --recording DIR --target NAME --out OUT
-                      [--edge-angle DEG] [--overwrite] [--quiet]
+                      [--edge-angle DEG] [--outputs PARTS] [--tiff-codec C] [--overwrite] [--quiet]
 
 Writes the output folder described in ``docs/outputs.md`` (see :mod:`plantreg_gui.core.export`)
 and prints, per source camera, the share of target pixels in each projection case.
@@ -11,6 +11,7 @@ Progress goes to stderr (``--quiet`` silences it); the summary goes to stdout.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -34,15 +35,26 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, type=Path, metavar="OUT", help="output folder (must not exist or be empty)")
     p.add_argument("--edge-angle", type=float, default=None, metavar="DEG",
                    help="mesh edge-cut angle in degrees (default 15, as in the paper)")
+    add_output_options(p)
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(run=run)
     return p
 
 
+def add_output_options(p: argparse.ArgumentParser) -> None:
+    """The output options ``plantreg register`` and ``plantreg batch`` share."""
+    p.add_argument("--outputs", default=None, metavar="PARTS",
+                   help="comma-separated parts of the output to write: registered,cases,areas,ply,previews,"
+                   "mosaic,summary (default: all)")
+    p.add_argument("--tiff-codec", default="deflate-fp", choices=("deflate-fp", "deflate", "zstd"),
+                   help="lossless compression of the registered TIFFs (default deflate-fp: deflate with the "
+                   "floating-point predictor; zstd is faster but not read by ImageJ/Fiji)")
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import cli
-    from ..core.export import check_output_spares_inputs, write_outputs
+    from ..core.export import check_output_spares_inputs, parse_outputs, write_outputs
     from ..core.recording import Recording
     from ..core.register import AREA_P4, AREA_P5, AREA_P6, Registrar, RegistrationParams
     from ..core.rig import Rig
@@ -57,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"{e.detail}; registration needs a depth camera", rig_path) from None
     if args.target not in rig.names:
         raise InputError(f"unknown target camera '{args.target}'; the rig has {', '.join(rig.names)}", rig_path)
+    what = parse_outputs(args.outputs)
     params = RegistrationParams()
     if args.edge_angle is not None:
         if not 0.0 < args.edge_angle < 90.0:
@@ -77,13 +90,16 @@ def run(args: argparse.Namespace) -> int:
 
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
     result = Registrar(rig, recording, params).register(args.target, progress.sub(0.0, 0.85))
-    write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0),
+    write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0), what=what,
+                  tiff_codec=args.tiff_codec,
                   inputs={"rig": rig_path.resolve(), "recording": Path(args.recording).resolve(),
                           "command": _command_line(args)})
 
     H, W = result.shape
     n = H * W
     print(f"registered into '{result.target}' ({W}x{H}); wrote {out}")
+    for w in result.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     for cam, counts in result.case_counts().items():
         # P1, P2, P3.1, P3.2, P5, P6 background, outside the source: % of all target pixels
         parts = [f"{_SHORT[c]} {100.0 * counts.get(c, 0) / n:5.1f}%" for c in (1, 2, 3, 4, 5, 0, 6)]
@@ -103,6 +119,10 @@ def _command_line(args: argparse.Namespace) -> str:
              "--target", args.target, "--out", str(args.out)]
     if args.edge_angle is not None:
         parts += ["--edge-angle", f"{args.edge_angle:g}"]
+    if args.outputs is not None:
+        parts += ["--outputs", args.outputs]
+    if args.tiff_codec != "deflate-fp":
+        parts += ["--tiff-codec", args.tiff_codec]
     if args.overwrite:
         parts.append("--overwrite")
     return " ".join(parts)

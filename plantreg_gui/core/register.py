@@ -83,7 +83,9 @@ class RegistrationResult:
     """All arrays are in the target camera's pixel grid, (H, W[, ...]).
 
     ``points_rig`` (H, W, 3) float32: first object-mesh hit of each target ray, NaN if none.
-    ``registered[cam]`` (H, W) or (H, W, B) float32, NaN where not mapped, for every camera incl. the target.
+    ``registered[cam]`` (H, W) or (H, W, B) float32, NaN where not mapped, for every camera incl. the target;
+    above :data:`DENSE_LIMIT_BYTES` a :class:`~.hits.HitImage` (values at the hits only; behaves
+    like the array: ``np.asarray``, indexing, ``.shape``).
     ``source_uv[cam]`` (H, W, 2) float32 distorted source pixel coordinates of the hit (NaN if none).
     ``cases[cam]`` (H, W) uint8 for every camera except the target. ``area`` (H, W) uint8.
     ``timings`` stage name -> seconds.
@@ -98,6 +100,7 @@ class RegistrationResult:
     params: RegistrationParams
     timings: dict[str, float] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)  # sentences for the user (e.g. core.roi.cut_warning)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -293,8 +296,18 @@ class Registrar:
         self._rays_rig: dict[str, np.ndarray] = {}   # camera -> (H*W, 3) unit directions, rig frame
         self._float_images: dict[str, np.ndarray] = {}
         self.timings: dict[str, float] = {}
+        self.warnings: list[str] = []  # about the inputs, found while preparing (see core/roi.py)
 
     # -- caches
+    def ray_cache(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """The pixel-ray caches (camera name -> rays), for :meth:`use_ray_cache` of another
+        Registrar of the same rig (a batch: rays depend on the cameras only)."""
+        return self._rays_cam, self._rays_rig
+
+    def use_ray_cache(self, cache: tuple[dict[str, np.ndarray], dict[str, np.ndarray]]) -> None:
+        """Share the pixel rays of another Registrar of the *same rig* (see :meth:`ray_cache`)."""
+        self._rays_cam, self._rays_rig = cache
+
     def _camera_rays(self, cam: Camera) -> np.ndarray:
         if cam.name not in self._rays_cam:
             self._rays_cam[cam.name] = pixel_rays_cam(cam)
@@ -341,6 +354,10 @@ class Registrar:
         with _stage(progress, self.timings, "depth rays", 0.0, 0.2):
             rays = self._camera_rays(dcam)
         self.meshes = build_meshes(self.rig, depth_m, self.params, rays, progress.sub(0.2, 1.0), self.timings)
+        from .roi import cut_warning  # an ROI that cuts off most of the plant looks complete otherwise
+
+        w = cut_warning(dcam.to_rig(rays * depth_m.reshape(-1, 1)), *self.params.roi(self.rig))
+        self.warnings = [w] if w else []
         if self.meshes.object.n_triangles == 0:
             raise InputError(
                 "no surface inside the region of interest: the depth map has no valid neighbouring "
@@ -405,9 +422,8 @@ class Registrar:
                 source_uv[target] = uv.reshape(H, W, 2)
                 img = images[target]
                 C = 1 if img.ndim == 2 else int(np.prod(img.shape[2:]))
-                vals = nan_array((N, C))
-                vals[obj_idx] = img.reshape(N, C)[obj_idx]
-                registered[target] = _shape_values(vals, H, W, img)
+                vals = img.reshape(N, C)[obj_idx].astype(np.float32)
+                registered[target] = _registered_image(obj_idx, vals, H, W, img)
 
         n = max(1, len(cams))
         for i, scam in enumerate(cams):
@@ -443,10 +459,9 @@ class Registrar:
                 with _stage(progress, timings, f"sampling {scam.name}", a + 0.5 * (b - a), b):
                     img = images[scam.name]
                     C = 1 if img.ndim == 2 else int(np.prod(img.shape[2:]))
-                    vals = nan_array((N, C))
-                    sample_bilinear(img, uvh[in_idx], progress.sub(a + 0.5 * (b - a), b),
-                                    out=vals, rows=obj_idx[in_idx])
-                    registered[scam.name] = _shape_values(vals, H, W, img)
+                    vals = np.full((len(obj_idx), C), np.nan, dtype=np.float32)  # at the hits only
+                    sample_bilinear(img, uvh[in_idx], progress.sub(a + 0.5 * (b - a), b), out=vals, rows=in_idx)
+                    registered[scam.name] = _registered_image(obj_idx, vals, H, W, img)
 
         timings["total"] = time.perf_counter() - t_start
         stats = {
@@ -467,7 +482,28 @@ class Registrar:
             params=p,
             timings=timings,
             stats=stats,
+            warnings=list(self.warnings),
         )
+
+
+#: Registered images larger than this (dense, bytes) are kept as :class:`~.hits.HitImage`
+#: (values at the object hits only, expanded on demand): a 204-band cube in a 4K view is 6.8 GB
+#: dense, ~0.8 GB at the hits. Smaller ones stay plain arrays.
+DENSE_LIMIT_BYTES = 1 << 30
+
+
+def _registered_image(obj_idx: np.ndarray, vals: np.ndarray, H: int, W: int, img: np.ndarray):
+    """Values (M, C) float32 at the target pixels ``obj_idx`` (M,) -> the registered image:
+    (H, W[, C]) float32, NaN elsewhere, or the same as a HitImage above :data:`DENSE_LIMIT_BYTES`."""
+    C = vals.shape[1]
+    shape = (H, W) if img.ndim == 2 or C == 1 else (H, W, C)
+    if H * W * C * 4 > DENSE_LIMIT_BYTES:
+        from .hits import HitImage
+
+        return HitImage(obj_idx, vals, shape)
+    dense = nan_array((H * W, C))
+    dense[obj_idx] = vals
+    return _shape_values(dense, H, W, img)
 
 
 def _shape_values(vals: np.ndarray, H: int, W: int, img: np.ndarray) -> np.ndarray:
