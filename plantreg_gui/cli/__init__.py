@@ -16,7 +16,7 @@ from pathlib import Path
 from .. import __version__
 from ..core.errors import Cancelled, PlantregError
 
-SUBCOMMANDS = ("demo", "register", "calibrate")
+SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "recording", "batch")  # modules NAME_cmd
 
 
 class StderrProgress:

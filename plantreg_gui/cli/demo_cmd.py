@@ -27,6 +27,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="'demo': RGB 1280x720, hyperspectral 256x256x100; 'paper': RGB 3840x2160, "
                         "hyperspectral 512x512x204 (as in the paper's benchmark)")
     p.add_argument("--seed", type=nonneg_int, default=0, help="plant and noise seed (default 0)")
+    p.add_argument("--clean", action="store_true",
+                   help="ideal recording: exact depth (1 mm steps) and sharp images; by default the depth has "
+                        "time-of-flight artefacts (flying pixels, holes, 1 mm + 0.1 %% noise) and the thermal "
+                        "camera an optical blur")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(run=run)
@@ -43,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_location(d, "demo folder", folder=True, overwrite=args.overwrite)
     t0 = time.perf_counter()
     paths = write_demo(args.dir, size=args.size, seed=args.seed, progress=StderrProgress(args.quiet),
-                       overwrite=args.overwrite)
+                       overwrite=args.overwrite, clean=args.clean)
     print(f"wrote the synthetic demo to {d} in {time.perf_counter() - t0:.1f} s:")
     for name, p in paths.items():
         print(f"  {name:13s} {p}")

@@ -31,11 +31,16 @@ class Recording:
     images: dict[str, np.ndarray]
     paths: dict[str, Path] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
+    #: metres per depth unit of this recording (``"depth_scale"`` in recording.json); None = the rig's
+    depth_scale: float | None = None
 
     def depth_m(self, scale: float) -> np.ndarray:
-        """Depth in metres, float32 (H, W); NaN where there is no measurement."""
+        """Depth in metres, float32 (H, W); NaN where there is no measurement. ``scale`` (the rig's
+        metres per unit) is used unless the recording states its own ``depth_scale``."""
         if self.depth is None:
             raise InputError("the recording has no depth map", self.folder)
+        if self.depth_scale is not None:
+            scale = self.depth_scale
         d = self.depth.astype(np.float32) * np.float32(scale)
         d[~(d > 0)] = np.nan
         return d
@@ -73,8 +78,11 @@ class Recording:
                 raise InputError(f"depth map must be single-channel, got shape {depth.shape}", p)
             if depth.dtype.kind not in "uif":
                 raise InputError(f"depth map must hold real numbers, got dtype {depth.dtype}", p)
-        extra = {k: v for k, v in m.items() if k not in ("depth", "images")}
-        rec = cls(folder, depth, images, paths, extra)
+        extra = {k: v for k, v in m.items() if k not in ("depth", "images", "depth_scale")}
+        ds = m.get("depth_scale")
+        if ds is not None and (isinstance(ds, bool) or not isinstance(ds, (int, float)) or not 0 < ds < float("inf")):
+            raise InputError(f"depth_scale must be a positive number (metres per depth unit), got {ds!r}", manifest)
+        rec = cls(folder, depth, images, paths, extra, None if ds is None else float(ds))
         if rig is not None:
             rec.check(rig)
         return rec
@@ -123,6 +131,8 @@ class Recording:
             fn = names.get("depth", "depth.png")
             _write_any(folder / fn, self.depth)
             m["depth"] = fn
+        if self.depth_scale is not None:
+            m["depth_scale"] = self.depth_scale
         m.update(self.extra)
         atomic_write_text(folder / MANIFEST, json.dumps(m, indent=2) + "\n")
 

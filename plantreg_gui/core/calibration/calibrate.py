@@ -93,6 +93,10 @@ class Calibration:
     reference: str
     view_pose_deg: dict[tuple[str, str], float] = field(default_factory=dict)
     view_board_cam: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: (pose, camera) -> mean corner distance (px) of a view *excluded* by the user, measured with
+    #: the final intrinsics and the view's own board pose (as ``per_view_px``), so that an
+    #: exclusion can be judged; views whose board was not found are absent.
+    excluded_px: dict[tuple[str, str], float] = field(default_factory=dict)
 
     @property
     def weak_views(self) -> list[tuple[str, str, float, str]]:
@@ -461,4 +465,23 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
     rig = Rig(cameras, session.depth_camera, session.depth_scale)
     progress(1.0, "calibration done")
     used = sorted((p, c) for c in cams for p in views[c] if (p, c) not in outliers)
-    return Calibration(rig, board, intrinsics, board_res, used, joint_rms, ref, view_pose_deg, view_board_cam)
+    return Calibration(rig, board, intrinsics, board_res, used, joint_rms, ref, view_pose_deg, view_board_cam,
+                       excluded_view_errors(intrinsics, session, detections, excluded))
+
+
+def excluded_view_errors(intrinsics: dict[str, "CameraCalibration"], session: Session,
+                         detections: dict[tuple[str, str], Detection], excluded) -> dict[tuple[str, str], float]:
+    """Mean corner distance (px) of each excluded view whose board was found, with the camera's
+    calibrated model and the view's own board pose (PnP)."""
+    out: dict[tuple[str, str], float] = {}
+    board = session.board
+    for key in sorted(excluded):
+        d, cc = detections.get(key), intrinsics.get(key[1])
+        if d is None or cc is None or d.status != FOUND or d.corners is None or len(d.corners) < 4:
+            continue
+        try:
+            per_view = _per_view_errors(cc.K, cc.dist, {key[0]: d}, board)[0]
+        except cv2.error:
+            continue
+        out[key] = per_view[key[0]]
+    return out

@@ -35,6 +35,24 @@ DEPTH_STEM = "depth"
 INVERTED_MODALITIES = ("thermal",)
 
 
+
+CAMERA_META_KEYS = ("units", "bands")
+
+
+def camera_meta_from_dict(c: dict[str, Any], what: str, path) -> dict[str, Any]:
+    """The ``units`` (str) and ``bands`` (list of nm) of a camera entry, checked."""
+    meta: dict[str, Any] = {}
+    if c.get("units") is not None:
+        if not isinstance(c["units"], str):
+            raise InputError(f"{what}: \"units\" must be a string (e.g. \"degC\")", path)
+        meta["units"] = c["units"]
+    if c.get("bands") is not None:
+        b = c["bands"]
+        if not isinstance(b, list) or not b or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in b):
+            raise InputError(f"{what}: \"bands\" must be a list of band centres in nm", path)
+        meta["bands"] = [float(x) for x in b]
+    return meta
+
 @dataclass
 class Pose:
     """One board pose: ``images`` camera name -> file, ``depth`` the depth map file or None."""
@@ -86,6 +104,9 @@ class Session:
     poses: list[Pose] = field(default_factory=list)
     review: dict[str, Any] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
+    #: per camera, what the rig file carries beside the geometry: ``units`` (str, e.g. "degC") and
+    #: ``bands`` (band centres in nm, for multi-band cameras); copied into the calibrated rig
+    camera_meta: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -173,12 +194,16 @@ class Session:
             unique_names(list(cams))
         except ValueError as e:
             raise InputError(str(e), path) from None
+        camera_meta: dict[str, dict[str, Any]] = {}
         for name, c in cams.items():
             if not isinstance(c, dict):
                 raise InputError(f"camera '{name}' must be an object {{\"modality\": ...}}", path)
             if ":" in str(name) or str(name) == DEPTH_STEM:
                 raise InputError(f"camera name '{name}' is not allowed (no ':' and not '{DEPTH_STEM}')", path)
             cameras[str(name)] = str(c.get("modality", "unknown"))
+            meta = camera_meta_from_dict(c, f"camera '{name}'", path)
+            if meta:
+                camera_meta[str(name)] = meta
         depth_camera, depth_scale = None, 0.001
         if d.get("depth") is not None:
             dd = d["depth"]
@@ -204,7 +229,7 @@ class Session:
         if not isinstance(review.get("options", {}), dict):
             raise InputError("review.options must be an object {\"POSE:CAMERA\": {...}}", path)
         extra = {k: v for k, v in d.items() if k not in ("board", "depth", "cameras", "review")}
-        s = cls(folder, board, cameras, depth_camera, depth_scale, [], review, extra)
+        s = cls(folder, board, cameras, depth_camera, depth_scale, [], review, extra, camera_meta)
         s.rescan()
         return s
 
@@ -243,7 +268,7 @@ class Session:
         d: dict[str, Any] = {"board": self.board.to_dict()}
         if self.depth_camera is not None:
             d["depth"] = {"camera": self.depth_camera, "scale": self.depth_scale}
-        d["cameras"] = {n: {"modality": m} for n, m in self.cameras.items()}
+        d["cameras"] = {n: {"modality": m, **self.camera_meta.get(n, {})} for n, m in self.cameras.items()}
         d["review"] = self.review
         for k, v in self.extra.items():
             d.setdefault(k, v)
