@@ -86,7 +86,7 @@ def _no_depth_camera(root, rig, rec):
 
 def _unreadable_image(root, rig, rec):
     (rec / "rgb.png").write_bytes(b"this is not a png at all")
-    return rig, rec, "ir", rec / "rgb.png", ["read"]
+    return rig, rec, "ir", rec / "rgb.png", ["not a PNG file"]
 
 
 def _depth_wrong_size(root, rig, rec):
@@ -340,7 +340,7 @@ def _run_main(argv):
 def demo(tmp_path_factory):
     from plantreg_gui.core.synthetic import write_demo
 
-    return write_demo(tmp_path_factory.mktemp("demo") / "demo")
+    return write_demo(tmp_path_factory.mktemp("demo") / "demo", clean=True)
 
 
 @pytest.fixture(scope="module")
