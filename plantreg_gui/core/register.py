@@ -492,7 +492,7 @@ class Registrar:
         for i, scam in enumerate(cams):
             a = 0.32 + 0.68 * i / n
             b = 0.32 + 0.68 * (i + 1) / n
-            with _stage(progress, timings, f"classification {scam.name}", a, a + 0.5 * (b - a)):
+            with _stage(progress, timings, f"classification {scam.name}", a, a + 0.45 * (b - a)):
                 uvh, z = project_points(scam, Xh)
                 inside = (z > 0) & scam.in_image(uvh)
                 in_idx = np.flatnonzero(inside)
