@@ -360,7 +360,7 @@ def test_registering_another_target_reuses_the_registrar(ws, qapp):
 
 
 def test_cancel_registration(ws, qapp):
-    ws.registrar = None  # rebuild the meshes: long enough to cancel
+    ws.session.registrar = None  # rebuild the meshes: long enough to cancel
     before = ws.result
     ws.run_registration("ir")
     assert ws.is_busy()
@@ -397,7 +397,7 @@ def test_worker_error_becomes_a_dialog(qapp, demo_dir, tmp_path):
 
 # ---------------------------------------------------------------------- Plant3DImageReg
 def test_plant3d_reader_and_nominal_optics(shared_data):
-    from plantreg_gui.gui.registration import plant3d
+    from plantreg_gui.core import plant3d
 
     folder = shared_data / "plant3dimagereg"
     plants = plant3d.list_plants(folder)

@@ -17,6 +17,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from . import modality
+
 #: Iteration criteria for undistortion: OpenCV's default (5 iterations) leaves errors of
 #: tenths of a pixel near the border of strongly distorted lenses.
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
@@ -180,5 +182,6 @@ class Camera:
         if width <= 0 or height <= 0:
             raise ValueError(f"camera '{name}': width and height must be positive")
         extra = {k: v for k, v in d.items() if k not in cls._KNOWN}
-        return cls(name, str(d.get("modality", "unknown")), width, height, K,
+        # canonical modality name ('visible' -> 'rgb', 'lwir' -> 'thermal'): nothing downstream re-interprets it
+        return cls(name, modality.canonical(str(d.get("modality", "unknown"))), width, height, K,
                    dist if dist.size else np.zeros(5), R, t, extra)

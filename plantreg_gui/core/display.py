@@ -20,45 +20,24 @@ from typing import Mapping, Sequence
 import cv2
 import numpy as np
 
-from .register import AREA_NAMES, CASE_NAMES
+from . import cases
+from . import modality as _modality
+from .cases import AREA_NAMES, CASE_NAMES
 
 #: Colour of pixels without a value (NaN): a neutral dark grey.
 BACKGROUND_RGB: tuple[int, int, int] = (28, 28, 28)
 
-#: Default colour map per modality (matplotlib names).
-DEFAULT_CMAPS: dict[str, str] = {
-    "thermal": "RdBu_r",        # diverging blue-white-red like the paper's thermal figures
-    "infrared": "gray",
-    "depth": "viridis",
-    "hyperspectral": "gray",    # a single band of a cube
-}
+#: Default colour map per canonical modality (matplotlib names), from :mod:`.modality`.
+DEFAULT_CMAPS: dict[str, str] = {m.name: m.cmap for m in _modality.MODALITIES}
 
-_MODALITY_ALIASES = {
-    "ir": "infrared", "nir": "infrared", "tof": "infrared", "amplitude": "infrared",
-    "color": "rgb", "colour": "rgb", "bgr": "rgb",
-    "hsi": "hyperspectral", "multispectral": "hyperspectral", "spectral": "hyperspectral",
-    "temperature": "thermal", "lwir": "thermal",
-}
-
-#: Case-map overlay colours (code -> RGB), the paper's: P2 cyan, P3.1 yellow, P3.2 magenta;
-#: P5 orange (our choice); "outside the source" grey. P1 and P6 background have no overlay.
-CASE_COLOURS: dict[int, tuple[int, int, int]] = {
-    2: (0, 255, 255),      # P2 occluded
-    3: (255, 255, 0),      # P3.1 incoming uncertain
-    4: (255, 0, 255),      # P3.2 outgoing uncertain
-    5: (255, 140, 0),      # P5 uncertain area (no object behind)
-    6: (128, 128, 128),    # hit outside the source image / behind the source camera
-}
+#: Case-map and area-map overlay colours (code -> RGB), from :mod:`.cases`; codes without an
+#: overlay (P1, P6 background) are absent.
+CASE_COLOURS: dict[int, tuple[int, int, int]] = dict(cases.CASE_COLOURS)
 #: Optional colour for P1 (off by default: legitimate pixels need no mark).
 P1_COLOUR: tuple[int, int, int] = (255, 255, 255)
+AREA_COLOURS: dict[int, tuple[int, int, int]] = dict(cases.AREA_COLOURS)
 
-#: Area-map overlay colours: P4 green, P5 orange; P6 certain background has no overlay.
-AREA_COLOURS: dict[int, tuple[int, int, int]] = {
-    4: (0, 255, 0),        # P4 certain object
-    5: (255, 140, 0),      # P5 uncertain object area
-}
-
-#: Legend labels per code (the same names as :mod:`.register`).
+#: Legend labels per code (the same names as :mod:`.cases`).
 CASE_LABELS: dict[int, str] = dict(CASE_NAMES)
 AREA_LABELS: dict[int, str] = dict(AREA_NAMES)
 
@@ -72,8 +51,8 @@ def legend(kind: str = "cases", colours: Mapping[int, tuple[int, int, int]] | No
 
 
 def canonical_modality(modality: str | None) -> str:
-    m = (modality or "").strip().lower()
-    return _MODALITY_ALIASES.get(m, m)
+    """The canonical modality name (kept for callers; the registry is :mod:`.modality`)."""
+    return _modality.canonical(modality)
 
 
 # ---------------------------------------------------------------------- statistics
@@ -250,16 +229,16 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
     every pixel is still drawn. NaN pixels are drawn in :data:`BACKGROUND_RGB`.
     """
     a = np.asarray(img)
-    mod = canonical_modality(modality)
+    mod = _modality.get(modality)
     if a.ndim == 3 and a.shape[2] == 1:
         a = a[:, :, 0]
     if a.ndim == 2:
-        if mod == "depth":
+        if mod.name == "depth":
             # depth 0 (or negative) means "no measurement", as in Recording.depth_m
             a = a.astype(np.float32)
             with np.errstate(invalid="ignore"):
                 a[~(a > 0)] = np.nan
-        name = cmap or DEFAULT_CMAPS.get(mod, "gray")
+        name = cmap or mod.cmap
         return colorize(a, name, limits, percentiles, mask)
     if a.ndim != 3:
         raise ValueError(f"expected an (H, W) or (H, W, C) image, got shape {a.shape}")
@@ -270,9 +249,9 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
             raise ValueError(f"bands must be three indices into {C} bands, got {bands}")
         sub = a[:, :, b]
         return _stretch_channels(sub, percentiles, mask, None if limits is None else [limits] * 3)
-    if C == 4 and mod == "rgb":
+    if C == 4 and mod.is_colour:
         a, C = a[:, :, :3], 3
-    if C == 3 and mod != "hyperspectral":
+    if C == 3 and not mod.is_cube:
         if a.dtype == np.uint8 and limits is None:
             return np.ascontiguousarray(a)
         lo, hi = limits if limits is not None else auto_limits(a, percentiles, mask)

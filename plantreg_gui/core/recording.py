@@ -35,9 +35,9 @@ class Recording:
         """Depth in metres, float32 (H, W); NaN where there is no measurement."""
         if self.depth is None:
             raise InputError("the recording has no depth map", self.folder)
-        d = self.depth.astype(np.float32) * np.float32(scale)
-        d[~(d > 0)] = np.nan
-        return d
+        from .depth import to_metres
+
+        return to_metres(self.depth, scale)
 
     @classmethod
     def load(cls, folder: str | Path, rig: Rig | None = None) -> "Recording":

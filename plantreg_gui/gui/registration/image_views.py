@@ -331,3 +331,65 @@ class SpectrumPlot(QWidget):
             ax.set_xlabel("wavelength (nm)" if wl is not None else "band", fontsize=7)
             ax.set_ylabel("value", fontsize=7)
         self.canvas.draw_idle()
+
+
+# ---------------------------------------------------------------------- the workspace's image grids
+class RawImagesView(ViewGrid):
+    """The recording's raw images, one unlinked view each (each in its own pixel grid)."""
+
+    needs = "raw"
+
+    def __init__(self, session, parent: QWidget | None = None):
+        super().__init__(linked=False, parent=parent)
+        self.session = session
+        session.events.raw.connect(self._refresh)
+        session.events.display.connect(self._display)
+        self.hovered.connect(lambda name, r, c: session.hover(name, r, c))
+
+    def _refresh(self) -> None:
+        s = self.session
+        self.set_layers([L.name for L in s.raw], {L.name: s.layer_title(L, raw=True) for L in s.raw})
+        for L in s.raw:
+            self.set_image(L.name, s.raw_renders[L.name])
+
+    def _display(self, name: str) -> None:
+        if name in self.views and name in self.session.raw_renders:
+            self.set_image(name, self.session.raw_renders[name])
+
+
+class SideBySideView(ViewGrid):
+    """Every registered image in the target grid, zoom, pan and cursor linked."""
+
+    needs = "result"
+
+    def __init__(self, session, parent: QWidget | None = None):
+        super().__init__(linked=True, parent=parent)
+        self.session = session
+        session.events.result.connect(self._refresh)
+        session.events.display.connect(self._display)
+        session.events.cursor.connect(self._cursor)
+        self.hovered.connect(lambda _name, r, c: session.hover("target", r, c))
+
+    def _refresh(self) -> None:
+        s = self.session
+        self.set_layers([L.name for L in s.layers], {L.name: s.layer_title(L) for L in s.layers})
+        for L in s.layers:
+            self.set_image(L.name, s.renders[L.name])
+        self.set_home(home_rect(s.home))
+
+    def _display(self, name: str) -> None:
+        if name in self.views and name in self.session.renders:
+            self.set_image(name, self.session.renders[name])
+
+    def _cursor(self) -> None:
+        c = self.session.cursor
+        if c is not None and c[0] == "target":
+            self.set_cursor(c[1], c[2])
+
+
+def home_rect(box: tuple[float, float, float, float] | None) -> QRectF | None:
+    """The session's object box (x0, y0, x1, y1) as a scene rectangle."""
+    if box is None:
+        return None
+    x0, y0, x1, y1 = box
+    return QRectF(x0, y0, x1 - x0, y1 - y0)

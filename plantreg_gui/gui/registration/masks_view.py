@@ -12,7 +12,7 @@ from PySide6.QtWidgets import (
 )
 
 from ...core import display
-from ...core.register import AREA_NAMES, CASE_NAMES
+from ...core.cases import AREA_NAMES, CASE_NAMES
 from .image_views import ImageView
 from .model import case_table
 
@@ -132,9 +132,8 @@ class MasksView(QWidget):
         lay.setContentsMargins(2, 2, 2, 2)
         lay.addWidget(split)
 
-        self._source_chosen = False
+        self.session = None
         self.source.currentIndexChanged.connect(self._source_changed)
-        self.source.activated.connect(lambda _i: setattr(self, "_source_chosen", True))
         for w in (self.base,):
             w.currentIndexChanged.connect(self.update_view)
         for w in (self.show_cases, self.show_areas):
@@ -144,12 +143,12 @@ class MasksView(QWidget):
         self.area_legend.changed.connect(self.update_view)
 
     def set_data(self, target: str, renders: dict[str, np.ndarray], order: list[str],
-                 cases: dict[str, np.ndarray], area: np.ndarray) -> None:
+                 cases: dict[str, np.ndarray], area: np.ndarray, source: str | None = None) -> None:
         """``renders`` display renderings in the target grid; ``cases[source]`` (H, W) uint8 case
-        codes; ``area`` (H, W) uint8 area codes."""
+        codes; ``area`` (H, W) uint8 area codes; ``source`` the case map to show."""
         self.target, self.renders, self.cases, self.area = target, renders, cases, area
         for combo, items, keep in ((self.base, [n for n in order if n in renders], self.base.currentText()),
-                                   (self.source, list(cases), self.source.currentText())):
+                                   (self.source, list(cases), source or self.source.currentText())):
             combo.blockSignals(True)
             combo.clear()
             combo.addItems(items)
@@ -157,23 +156,54 @@ class MasksView(QWidget):
                 combo.setCurrentText(keep)
             combo.blockSignals(False)
         self.area_legend.set_rows(case_table(area, AREA_NAMES, display.AREA_COLOURS))
-        if self.source.count() and not self._source_chosen:
-            # start with the source that has the most occluded/uncertain pixels: the one worth checking
-            worst = max(cases, key=lambda n: int(np.isin(cases[n], (2, 3, 4)).sum()))
-            self.source.blockSignals(True)
-            self.source.setCurrentText(worst)
-            self.source.blockSignals(False)
-        self._source_changed()
+        self._show_source()
 
     def set_source(self, name: str) -> None:
-        self._source_chosen = True
         self.source.setCurrentText(name)
 
     def _source_changed(self) -> None:
+        if self.session is not None:
+            self.session.set_masks_source(self.source.currentText())  # comes back as masks_source
+        else:
+            self._show_source()
+
+    def _show_source(self) -> None:
         src = self.source.currentText()
         if src in self.cases:
             self.case_legend.set_rows(case_table(self.cases[src], CASE_NAMES, display.CASE_COLOURS))
         self.update_view()
+
+    # ------------------------------------------------------------------ the workspace's session
+    needs = "result"
+
+    def bind(self, session) -> "MasksView":
+        """Show ``session``'s case and area maps over its renderings; the source is the session's."""
+        from .image_views import home_rect
+
+        self.session = session
+
+        def refresh() -> None:
+            r = session.result
+            self.view.set_home(home_rect(session.home))
+            if r is None:
+                self.set_data("", {}, [], {}, np.zeros((0, 0), np.uint8))
+                self.view.clear()
+                return
+            self.set_data(r.target, session.renders, [L.name for L in session.layers], r.cases, r.area,
+                          session.masks_source)
+
+        def source() -> None:
+            if session.masks_source and self.source.currentText() != session.masks_source:
+                self.source.blockSignals(True)
+                self.source.setCurrentText(session.masks_source)
+                self.source.blockSignals(False)
+            self._show_source()
+
+        session.events.result.connect(refresh)
+        session.events.masks_source.connect(source)
+        session.events.display.connect(lambda _name: self.update_view())
+        self.hovered.connect(lambda _src, r, c: session.hover("target", r, c))
+        return self
 
     def composite(self) -> np.ndarray | None:
         base = self.renders.get(self.base.currentText())

@@ -180,3 +180,22 @@ class MosaicView(QWidget):
 
     def stop(self) -> None:
         self._flick_timer.stop()
+
+    # ------------------------------------------------------------------ the workspace's session
+    needs = "result"
+
+    def bind(self, session) -> "MosaicView":
+        """Show ``session``'s registered renderings; hovering moves its cursor."""
+        from .image_views import home_rect
+        from .model import DEPTH
+
+        def refresh() -> None:
+            cams = [L.name for L in session.layers if L.name != DEPTH]
+            home = home_rect(session.home)
+            self.view.set_home(home)
+            self.set_renders(session.renders, cams, None if home is None else (int(home.height()), int(home.width())))
+
+        session.events.result.connect(refresh)
+        session.events.display.connect(lambda _name: self.update_view())
+        self.hovered.connect(lambda _src, r, c: session.hover("target", r, c))
+        return self
