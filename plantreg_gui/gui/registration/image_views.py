@@ -294,7 +294,9 @@ class SpectrumPlot(QWidget):
         from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
         from matplotlib.figure import Figure
 
-        self.figure = Figure(figsize=(4, 1.6), dpi=90, layout="constrained")
+        # fixed margins: a constrained layout is re-solved on every draw (~0.1-0.5 s on the GUI thread)
+        self.figure = Figure(figsize=(4, 1.6), dpi=90)
+        self.figure.subplots_adjust(left=0.17, right=0.97, top=0.86, bottom=0.25)
         self.canvas = FigureCanvasQTAgg(self.figure)
         self.ax = self.figure.add_subplot(111)
         lay = QVBoxLayout(self)
@@ -317,19 +319,25 @@ class SpectrumPlot(QWidget):
             self._timer.start()
 
     def _draw(self) -> None:
+        """Update the one line in place (clearing and re-plotting the axes costs far more)."""
         if self._pending is None:
             return
         values, wl, title = self._pending
         self._pending = None
         ax = self.ax
-        ax.clear()
-        ax.set_title(title, fontsize=8)
-        ax.tick_params(labelsize=7)
-        if values is not None and np.any(np.isfinite(values)):
-            x = wl if wl is not None else np.arange(values.size)
-            ax.plot(x, values, color="#2a7f2a", lw=1.2)
-            ax.set_xlabel("wavelength (nm)" if wl is not None else "band", fontsize=7)
+        if self._line is None:
+            ax.tick_params(labelsize=7)
             ax.set_ylabel("value", fontsize=7)
+            (self._line,) = ax.plot([], [], color="#2a7f2a", lw=1.2)
+        ax.set_title(title, fontsize=8)
+        ok = values is not None and np.any(np.isfinite(values))
+        self._line.set_visible(bool(ok))
+        if ok:
+            x = wl if wl is not None else np.arange(values.size)
+            self._line.set_data(x, values)
+            ax.set_xlabel("wavelength (nm)" if wl is not None else "band", fontsize=7)
+            ax.relim()
+            ax.autoscale_view()
         self.canvas.draw_idle()
 
 

@@ -27,7 +27,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ...core import modality
-from ...core.cases import area_label, case_label
+from ...core.cases import Case, area_label, case_label
 from ...core.depth import to_millimetres
 from ...core.errors import InputError
 from ...core.recording import Recording
@@ -121,10 +121,12 @@ def register_job(registrar, rig: Rig, rec: Recording, target: str, settings, pro
         for label, mesh in (("object mesh", m.object), ("uncertainty mesh", m.uncertainty)):
             if mesh is not None and len(mesh.triangles):
                 meshes[label] = (np.asarray(mesh.vertices, np.float32), np.asarray(mesh.triangles, np.int64))
+    # everything the GUI thread would otherwise compute on arrival
     box = object_box(result.points_rig)
     progress(1.0, "done")
     return {"registrar": registrar, "result": result, "layers": layers, "renders": renders,
-            "cloud": cloud, "meshes": meshes, "box": box}
+            "cloud": cloud, "meshes": meshes, "box": box, "summary": summary_html(result),
+            "worst": worst_source(result.cases)}
 
 
 def plant3d_job(folder: Path, plant: str, settings, progress) -> dict:
@@ -143,6 +145,33 @@ def plant3d_job(folder: Path, plant: str, settings, progress) -> dict:
             cloud.values[L.name] = L.data.reshape(-1)[p.point_pixels].astype(np.float32)
             cloud.modalities[L.name] = L.modality
     return {"plant": p, "layers": layers, "renders": renders, "cloud": cloud}
+
+
+def summary_html(r: Any) -> str:
+    """The side panel's summary of a result: size, slowest stages, case counts per source."""
+    h, w = r.shape
+    lines = [f"<b>Target {r.target}</b> ({w}x{h})"]
+    if r.timings:
+        stages = {k: v for k, v in r.timings.items() if k != "total"}
+        total = r.timings.get("total", sum(stages.values()))
+        top = sorted(stages.items(), key=lambda kv: -kv[1])[:4]
+        lines.append(f"registration {total:.2f} s (slowest: " + ", ".join(f"{k} {v:.2f} s" for k, v in top) + ")")
+    n = h * w
+    for cam, codes in r.cases.items():
+        cc = np.bincount(np.asarray(codes, np.uint8).ravel(), minlength=8)
+        p1, obj = int(cc[Case.P1]), n - int(cc[Case.BACKGROUND])
+        lines.append(f"{cam}: P1 {p1:,} ({100 * p1 / max(obj, 1):.1f}% of object), P2 {int(cc[Case.P2]):,}, "
+                     f"P3.1 {int(cc[Case.P31]):,}, P3.2 {int(cc[Case.P32]):,}")
+    return "<br>".join(lines)
+
+
+def worst_source(cases: dict[str, np.ndarray]) -> str | None:
+    """The source with the most occluded or uncertain pixels: the one worth checking first."""
+    if not cases:
+        return None
+    bad = {n: int(np.bincount(np.asarray(c, np.uint8).ravel(), minlength=8)[[Case.P2, Case.P31, Case.P32]].sum())
+           for n, c in cases.items()}
+    return max(bad, key=bad.get)
 
 
 def object_box(points_rig: np.ndarray, margin: float = 0.08
@@ -186,6 +215,7 @@ class RegistrationSession:
     home: tuple[float, float, float, float] | None = None    # object box in the target grid
     display: dict[str, DisplaySettings] = field(default_factory=dict)
     masks_source: str | None = None
+    summary: str = ""                                          # HTML, see summary_html()
     cursor: tuple[str, int, int] | None = None                # (layer or "target", row, col)
     readout: str = ""
     spectrum: tuple[np.ndarray, np.ndarray | None, str] | None = None
@@ -272,6 +302,7 @@ class RegistrationSession:
         self.generation += 1  # results of registrations still running belong to the old data
         had = self.result is not None or self.cloud is not None
         self.registrar = self.result = self.cloud = self.home = None
+        self.summary = ""
         self.layers, self.renders, self.meshes = [], {}, {}
         if had:
             self.events.result.emit()
@@ -284,10 +315,9 @@ class RegistrationSession:
         self.layers, self.renders, self.cloud = out["layers"], out["renders"], out["cloud"]
         self.meshes = out.get("meshes", {})
         self.home, centre = out.get("box") or object_box(self.result.points_rig)
+        self.summary = out["summary"] if "summary" in out else summary_html(self.result)
         if self.masks_source not in self.result.cases:
-            cases = self.result.cases
-            # start with the source that has the most occluded/uncertain pixels: the one worth checking
-            self.masks_source = max(cases, key=lambda n: int(np.isin(cases[n], (2, 3, 4)).sum())) if cases else None
+            self.masks_source = out["worst"] if "worst" in out else worst_source(self.result.cases)
         self.events.result.emit()
         self.events.masks_source.emit()
         if centre is not None:  # start with the cursor on the object so every read-out has a value
@@ -394,23 +424,7 @@ class RegistrationSession:
         return t.removeprefix("Registering into ")
 
     def summary_html(self) -> str:
-        r = self.result
-        if r is None:
-            return ""
-        h, w = r.shape
-        lines = [f"<b>Target {r.target}</b> ({w}x{h})"]
-        if r.timings:
-            stages = {k: v for k, v in r.timings.items() if k != "total"}
-            total = r.timings.get("total", sum(stages.values()))
-            top = sorted(stages.items(), key=lambda kv: -kv[1])[:4]
-            lines.append(f"registration {total:.2f} s (slowest: " + ", ".join(f"{k} {v:.2f} s" for k, v in top) + ")")
-        n = h * w
-        for cam, cc in r.case_counts().items():
-            p1 = cc.get(1, 0)
-            obj = n - cc.get(0, 0)
-            lines.append(f"{cam}: P1 {p1:,} ({100 * p1 / max(obj, 1):.1f}% of object), P2 {cc.get(2, 0):,}, "
-                         f"P3.1 {cc.get(3, 0):,}, P3.2 {cc.get(4, 0):,}")
-        return "<br>".join(lines)
+        return self.summary
 
     def layer_title(self, L: Layer, raw: bool = False) -> str:
         h, w = L.data.shape[:2]
