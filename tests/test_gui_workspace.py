@@ -459,6 +459,7 @@ def test_load_demo_writes_opens_and_registers(qapp, demo_dir, monkeypatch):
     """``--demo``: the demo is written on a worker (here copied from the session's demo to save
     time), opened, and registered into the requested target; busy until all of it is done."""
     import plantreg_gui.core.synthetic as synthetic
+    import plantreg_gui.gui.registration.session as session_module
     from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
 
     calls = []
@@ -469,6 +470,7 @@ def test_load_demo_writes_opens_and_registers(qapp, demo_dir, monkeypatch):
         return {"rig": Path(folder) / "rig.json", "recording": Path(folder) / "recording"}
 
     monkeypatch.setattr(synthetic, "write_demo", fake_write_demo)
+    monkeypatch.setattr(session_module, "DEMO_IN_PROCESS", False)  # the fake lives in this process
     w = RegistrationWorkspace()
     w.show()
     try:

@@ -7,6 +7,10 @@ thread; workers hand over numpy arrays (:class:`~.model.Cloud`).
 
 from __future__ import annotations
 
+import importlib
+import sys
+import threading
+
 import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
@@ -16,6 +20,18 @@ from PySide6.QtWidgets import (
 from .model import Cloud
 
 MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
+
+
+_PREIMPORT: threading.Thread | None = None
+
+
+def _preimport_vtk() -> None:
+    """Import pyvista/VTK on a background thread once: importing them when the 3D tab is first
+    opened held the GUI thread for 1-5 s. Only the plotter itself must be made on the GUI thread."""
+    global _PREIMPORT
+    if _PREIMPORT is None and "pyvistaqt" not in sys.modules:
+        _PREIMPORT = threading.Thread(target=importlib.import_module, args=("pyvistaqt",), name="preimport-vtk")
+        _PREIMPORT.start()
 
 
 class CloudView(QWidget):
@@ -75,6 +91,7 @@ class CloudView(QWidget):
         lay.addWidget(split, 1)
         self.colour.currentIndexChanged.connect(self._recolour)
         self.point_size.valueChanged.connect(self._resize_points)
+        _preimport_vtk()
 
     # ------------------------------------------------------------------ data
     def set_cloud(self, cloud: Cloud | None, meshes: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,

@@ -93,12 +93,21 @@ def load_job(rig_path: Path | None, rec_path: Path, rig: Rig | None, settings, p
             "layers": layers, "renders": renders}
 
 
+#: Write the demo in a child process: building the scene holds the GIL for seconds in Open3D
+#: calls (mesh conversion, BVH), which froze the GUI thread for 1-2 s on a worker thread.
+DEMO_IN_PROCESS = True
+
+
 def demo_job(folder: Path, settings, progress) -> dict:
-    from ...core.synthetic import write_demo
+    from ...core import synthetic
+    from ...core.procs import call_in_process
 
     progress(0.0, "writing the demo rig and recording")
     # the calibration session is the wizard's business; leaving it out halves the start-up
-    write_demo(folder, calibration=False, progress=progress.sub(0.0, 0.6))
+    if DEMO_IN_PROCESS:
+        call_in_process(synthetic.write_demo, folder, calibration=False, progress=progress.sub(0.0, 0.6))
+    else:
+        synthetic.write_demo(folder, calibration=False, progress=progress.sub(0.0, 0.6))
     out = load_job(folder / "rig.json", folder / "recording", None, settings, progress.sub(0.6, 1.0))
     out["demo"] = True
     return out
