@@ -14,6 +14,7 @@ Cubes with other band counts are shown as PCA false colour or as three chosen ba
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import Mapping, Sequence
 
@@ -184,12 +185,65 @@ def pca_scores(cube: np.ndarray, mask: np.ndarray | None = None, n: int = 3) -> 
     return out.reshape(H, W, n)
 
 
+@dataclass(frozen=True)
+class PcaBasis:
+    """A fitted PCA false colour: ``mean`` (B,), ``components`` (B, 3), ``limits`` per channel.
+    Rendering another cube of the same camera with it (e.g. the registered cube with the raw
+    cube's basis) gives the same colour to the same spectrum."""
+
+    mean: np.ndarray
+    components: np.ndarray
+    limits: tuple[tuple[float, float], ...]
+
+    def scores(self, cube: np.ndarray) -> np.ndarray:
+        """(H, W, B) -> (H, W, 3) float32 scores; NaN where any band is not finite."""
+        H, W, B = cube.shape
+        flat = np.asarray(cube).reshape(-1, B)
+        flat32 = flat if flat.dtype == np.float32 else flat.astype(np.float32)
+        V = self.components.astype(np.float32)
+        out = flat32 @ V - (self.mean.astype(np.float32) @ V)
+        if flat.dtype.kind == "f":
+            out[~np.isfinite(flat).all(axis=1)] = np.nan
+        return out.reshape(H, W, V.shape[1])
+
+
+def fit_pca(cube: np.ndarray, mask: np.ndarray | None = None,
+            percentiles: tuple[float, float] = (1, 99)) -> PcaBasis | None:
+    """The PCA false colour of ``cube`` (H, W, B) as :func:`pca_false_colour` draws it; None
+    when fewer than two pixels are finite."""
+    cube = np.asarray(cube)
+    B = cube.shape[2]
+    flat = cube.reshape(-1, B)
+    finite = np.isfinite(flat).all(axis=1) if cube.dtype.kind == "f" else np.ones(len(flat), bool)
+    fit = finite if mask is None else finite & np.asarray(mask, dtype=bool).ravel()
+    idx = np.flatnonzero(fit)
+    if idx.size < 2:
+        return None
+    idx = _sample(idx, max(2000, _MAX_SAMPLES // max(B, 1)))
+    X = flat[idx].astype(np.float64)
+    mean = X.mean(axis=0)
+    Xc = X - mean
+    w, V = np.linalg.eigh(Xc.T @ Xc / max(len(Xc) - 1, 1))
+    V = V[:, np.argsort(w)[::-1][:3]]
+    signs = np.sign(V[np.argmax(np.abs(V), axis=0), np.arange(V.shape[1])])
+    V = V * np.where(signs == 0, 1.0, signs)
+    if V.shape[1] < 3:
+        V = np.hstack([V, np.zeros((B, 3 - V.shape[1]))])
+    basis = PcaBasis(mean, V, ((0.0, 1.0),) * 3)
+    sc = basis.scores(cube)
+    limits = tuple(auto_limits(sc[:, :, c], percentiles, mask) for c in range(3))
+    return PcaBasis(mean, V, limits)
+
+
 def pca_false_colour(cube: np.ndarray, mask: np.ndarray | None = None,
-                     percentiles: tuple[float, float] = (1, 99)) -> np.ndarray:
-    """Cube (H, W, B) -> (H, W, 3) uint8: PC1 red, PC2 green, PC3 blue, each percentile-stretched.
+                     percentiles: tuple[float, float] = (1, 99), basis: PcaBasis | None = None) -> np.ndarray:
+    """Cube (H, W, B) -> (H, W, 3) uint8: PC1 red, PC2 green, PC3 blue, each percentile-stretched;
+    with ``basis``, that basis and its limits (see :class:`PcaBasis`).
 
     NaN pixels (any band non-finite) are drawn in :data:`BACKGROUND_RGB`.
     """
+    if basis is not None and basis.mean.shape[0] == cube.shape[2]:
+        return _stretch_channels(basis.scores(cube), percentiles, mask, basis.limits)
     scores = pca_scores(cube, mask, 3)
     return _stretch_channels(scores, percentiles, mask)
 
@@ -214,7 +268,8 @@ def _stretch_channels(img: np.ndarray, percentiles: tuple[float, float], mask: n
 # ---------------------------------------------------------------------- the entry point
 def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = None,
             limits: tuple[float, float] | None = None, percentiles: tuple[float, float] = (1, 99),
-            bands: tuple[int, int, int] | None = None, mask: np.ndarray | None = None) -> np.ndarray:
+            bands: tuple[int, int, int] | None = None, mask: np.ndarray | None = None,
+            pca: PcaBasis | None = None) -> np.ndarray:
     """Render any image for display: (H, W) or (H, W, C) -> (H, W, 3) uint8 RGB.
 
     * single band: colour map ``cmap`` (default by ``modality``, see :data:`DEFAULT_CMAPS`),
@@ -223,7 +278,8 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
     * three bands (and ``bands`` not given): RGB; uint8 shown as it is, other dtypes stretched
       with one pair of limits for all channels (keeps hues);
     * four bands with modality 'rgb': RGBA, alpha dropped;
-    * other band counts: PCA false colour, or ``bands=(r, g, b)`` band indices, each stretched.
+    * other band counts: PCA false colour (fitted here, or ``pca`` fitted on another cube of the
+      same camera by :func:`fit_pca`), or ``bands=(r, g, b)`` band indices, each stretched.
 
     ``mask`` (H, W) bool selects the pixels the statistics are taken from (e.g. the object);
     every pixel is still drawn. NaN pixels are drawn in :data:`BACKGROUND_RGB`.
@@ -262,7 +318,7 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
     if C == 2:
         # no natural colour for two bands: show the first, as a single band
         return colorize(a[:, :, 0], cmap or "gray", limits, percentiles, mask)
-    return pca_false_colour(a, mask, percentiles)
+    return pca_false_colour(a, mask, percentiles, pca)
 
 
 # ---------------------------------------------------------------------- overlays and comparisons

@@ -28,7 +28,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from .. import __version__
-from . import display
+from . import display, modality
 from .errors import InputError
 from .imageio import atomic_output_dir, atomic_path_suffixed, atomic_write_text, write_png, write_tiff
 from .progress import Reporter, ensure_reporter
@@ -57,6 +57,7 @@ def write_outputs(
     inputs: dict[str, Any] | None = None,
     what: Iterable[str] | None = None,
     display_options: Mapping[str, Mapping[str, Any]] | None = None,
+    mosaic_tile: int | None = None,
 ) -> Path:
     """Write ``result`` into the folder ``out`` (layout in the module docstring); returns ``out``.
 
@@ -64,7 +65,8 @@ def write_outputs(
     recording's own paths are added automatically). ``what`` selects a subset of
     :data:`OUTPUTS` (default: all). ``display_options`` maps a camera name to keyword
     arguments of :func:`display.to_rgb8` (cmap, limits, percentiles, bands) for the previews,
-    the mosaic and the point-cloud colours, so an export looks like the GUI's view.
+    the mosaic and the point-cloud colours, so an export looks like the GUI's view;
+    ``mosaic_tile`` the mosaic's tile size in pixels (default :func:`display.default_tile`).
 
     Raises :class:`InputError` if ``out`` exists and is not empty and ``overwrite`` is False;
     :class:`~plantreg_gui.core.errors.Cancelled` if cancelled through ``progress`` (nothing is
@@ -137,7 +139,7 @@ def write_outputs(
                           rep.sub(done / total, (done + weight) / total))
             elif kind == "mosaic":
                 rel = "mosaic.png"
-                write_png(tmp / rel, display.mosaic([preview(c) for c in cams], display.default_tile((H, W))))
+                write_png(tmp / rel, display.mosaic([preview(c) for c in cams], mosaic_tile or display.default_tile((H, W))))
             else:  # pragma: no cover - steps are built above
                 raise AssertionError(step)
             timings[kind] = timings.get(kind, 0.0) + time.perf_counter() - t0
@@ -392,7 +394,7 @@ def _colour_camera(result: RegistrationResult, rig: Rig) -> str | None:
     """The camera whose display rendering colours the point cloud: the rgb camera, else the target
     (None when no camera has an image)."""
     for c in rig.cameras:
-        if display.canonical_modality(c.modality) == "rgb" and c.name in result.registered:
+        if modality.is_colour(c.modality) and c.name in result.registered:
             return c.name
     if result.target in result.registered:
         return result.target

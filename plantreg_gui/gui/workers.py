@@ -9,6 +9,7 @@ on the GUI thread; :func:`show_error` is the one place where errors become dialo
 from __future__ import annotations
 
 import traceback
+import weakref
 from typing import Any, Callable
 
 from PySide6.QtCore import QObject, QThread, Signal, Slot
@@ -72,8 +73,12 @@ class Worker(QObject):
         self._runner.cancelled.connect(self._on_cancelled)
         self._running = False
 
+    #: workers whose thread has started and not yet ended (for leak checks in tests)
+    running: "weakref.WeakSet[Worker]" = weakref.WeakSet()
+
     def start(self) -> "Worker":
         self._running = True
+        Worker.running.add(self)
         self._thread.start()
         return self
 
@@ -95,6 +100,7 @@ class Worker(QObject):
 
     def _end(self) -> None:
         self._running = False
+        Worker.running.discard(self)
         self._thread.quit()
         self._thread.wait()
         self.done.emit()
@@ -121,8 +127,14 @@ class Worker(QObject):
         self._end()
 
 
+#: (title, message) of every error shown: an unattended ``--screenshot`` run reports them and
+#: fails instead of exiting 0 with a dialog nobody sees.
+SHOWN_ERRORS: list[tuple[str, str]] = []
+
+
 def show_error(parent: QWidget | None, title: str, message: str, details: str = "") -> None:
     """The one place where errors become dialogs (non-modal-safe: uses open() under tests)."""
+    SHOWN_ERRORS.append((title, message))
     box = QMessageBox(QMessageBox.Icon.Warning, title, message, QMessageBox.StandardButton.Ok, parent)
     if details:
         box.setDetailedText(details)

@@ -329,9 +329,17 @@ class SpectrumPlot(QWidget):
             ax.tick_params(labelsize=7)
             ax.set_ylabel("value", fontsize=7)
             (self._line,) = ax.plot([], [], color="#2a7f2a", lw=1.2)
+            self._note = ax.text(0.5, 0.5, "", transform=ax.transAxes, ha="center", va="center", fontsize=8,
+                                 color="#555")
         ax.set_title(title, fontsize=8)
-        ok = values is not None and np.any(np.isfinite(values))
-        self._line.set_visible(bool(ok))
+        ok = values is not None and bool(np.any(np.isfinite(values)))
+        self._line.set_visible(ok)
+        # an unmapped pixel says so instead of showing empty axes with made-up 0-1 limits
+        self.empty = not ok
+        self._note.set_text("" if ok else ("no value at this pixel (not mapped)" if values is not None
+                                            else "move the cursor over the image"))
+        ax.xaxis.set_visible(ok)
+        ax.yaxis.set_visible(ok)
         if ok:
             x = wl if wl is not None else np.arange(values.size)
             self._line.set_data(x, values)

@@ -40,7 +40,7 @@ class MosaicView(QWidget):
         self.tile_slider.setValue(64)
         self.tile_slider.setMaximumWidth(140)
         self.tile_slider.valueChanged.connect(self.tile.setValue)
-        self.tile.valueChanged.connect(lambda v: self.tile_slider.setValue(min(v, self.tile_slider.maximum())))
+        self.tile.valueChanged.connect(self._tile_to_slider)
         self.alpha = QSlider(Qt.Orientation.Horizontal)
         self.alpha.setRange(0, 100)
         self.alpha.setValue(50)
@@ -85,6 +85,12 @@ class MosaicView(QWidget):
         self.alpha.valueChanged.connect(self.update_view)
         self.flicker.toggled.connect(self._toggle_flicker)
         self._sync_controls()
+
+    def _tile_to_slider(self, v: int) -> None:
+        # the slider covers 4-400 px only; a larger typed tile must not be pulled back to 400
+        self.tile_slider.blockSignals(True)
+        self.tile_slider.setValue(min(v, self.tile_slider.maximum()))
+        self.tile_slider.blockSignals(False)
 
     # ------------------------------------------------------------------ data
     def set_renders(self, renders: dict[str, np.ndarray], order: list[str],

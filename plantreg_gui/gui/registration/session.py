@@ -32,7 +32,9 @@ from ...core.depth import to_millimetres
 from ...core.errors import InputError
 from ...core.recording import Recording
 from ...core.rig import Rig
-from .model import DEPTH, Cloud, DisplaySettings, Layer, build_cloud, raw_layers, registered_layers, render
+from .model import (
+    DEPTH, Cloud, DisplaySettings, Layer, build_cloud, pca_basis, raw_layers, registered_layers, render,
+)
 
 
 # ---------------------------------------------------------------------- events
@@ -71,11 +73,24 @@ class SessionEvents:
 
 
 # ---------------------------------------------------------------------- jobs (run on workers)
-def render_layers(layers: list[Layer], settings: dict[str, DisplaySettings], progress) -> dict[str, np.ndarray]:
+def render_layers(layers: list[Layer], settings: dict[str, DisplaySettings], progress,
+                  pca: dict[str, Any] | None = None) -> dict[str, np.ndarray]:
     out = {}
     for i, L in enumerate(layers):
         progress(i / max(len(layers), 1), f"rendering {L.name}")
-        out[L.name] = render(L.data, L.modality, settings.get(L.name))
+        out[L.name] = render(L.data, L.modality, settings.get(L.name), (pca or {}).get(L.name))
+    return out
+
+
+def raw_pca(rec: Recording, rig: Rig | None, settings: dict[str, DisplaySettings]) -> dict[str, Any]:
+    """PCA false-colour bases of the recording's raw cubes: the registered cubes are drawn with
+    them, so the same spectrum has the same colour in the raw and the registered view."""
+    out = {}
+    for name, img in rec.images.items():
+        mod = rig.camera(name).modality if rig is not None and name in rig.names else name
+        b = pca_basis(img, mod, settings.get(name))
+        if b is not None:
+            out[name] = b
     return out
 
 
@@ -121,7 +136,8 @@ def register_job(registrar, rig: Rig, rec: Recording, target: str, settings, pro
         registrar = Registrar(rig, rec)
     result = registrar.register(target, progress.sub(0.0, 0.85))
     layers = registered_layers(result, rig)
-    renders = render_layers(layers, settings, progress.sub(0.85, 0.97))
+    pca = raw_pca(rec, rig, settings)
+    renders = render_layers(layers, settings, progress.sub(0.85, 0.97), pca)
     progress(0.97, "building the point cloud")
     cloud = build_cloud(result.points_rig, layers, renders)
     meshes = {}
@@ -133,7 +149,7 @@ def register_job(registrar, rig: Rig, rec: Recording, target: str, settings, pro
     # everything the GUI thread would otherwise compute on arrival
     box = object_box(result.points_rig)
     progress(1.0, "done")
-    return {"registrar": registrar, "result": result, "layers": layers, "renders": renders,
+    return {"registrar": registrar, "result": result, "layers": layers, "renders": renders, "pca": pca,
             "cloud": cloud, "meshes": meshes, "box": box, "summary": summary_html(result),
             "worst": worst_source(result.cases)}
 
@@ -223,6 +239,7 @@ class RegistrationSession:
     meshes: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     home: tuple[float, float, float, float] | None = None    # object box in the target grid
     display: dict[str, DisplaySettings] = field(default_factory=dict)
+    pca: dict[str, Any] = field(default_factory=dict)         # raw cubes' false-colour bases
     masks_source: str | None = None
     summary: str = ""                                          # HTML, see summary_html()
     cursor: tuple[str, int, int] | None = None                # (layer or "target", row, col)
@@ -323,6 +340,7 @@ class RegistrationSession:
         self.registrar, self.result = out["registrar"], out["result"]
         self.layers, self.renders, self.cloud = out["layers"], out["renders"], out["cloud"]
         self.meshes = out.get("meshes", {})
+        self.pca = dict(out.get("pca", {}))
         self.home, centre = out.get("box") or object_box(self.result.points_rig)
         self.summary = out["summary"] if "summary" in out else summary_html(self.result)
         if self.masks_source not in self.result.cases:
@@ -337,6 +355,9 @@ class RegistrationSession:
     def set_display(self, name: str, settings: DisplaySettings) -> None:
         """New settings for one layer: re-render it wherever it is shown, then emit ``display``."""
         self.display[name] = settings
+        raw = self.layer(name, registered=False)
+        if raw is not None and name in self.pca:  # refit for the new limits, shared by raw and registered
+            self.pca[name] = pca_basis(raw.data, raw.modality, settings)
         for L in self.raw:
             if L.name == name:
                 self.raw_renders[name] = render(L.data, L.modality, settings)
@@ -344,7 +365,7 @@ class RegistrationSession:
                     self.cloud.colours[name] = self.raw_renders[name].reshape(-1, 3)[self.cloud.pixels]
         for L in self.layers:
             if L.name == name:
-                self.renders[name] = render(L.data, L.modality, settings)
+                self.renders[name] = render(L.data, L.modality, settings, self.pca.get(name))
                 if self.cloud is not None and name in self.cloud.colours:
                     self.cloud.colours[name] = self.renders[name].reshape(-1, 3)[self.cloud.pixels]
         self.events.display.emit(name)
@@ -393,7 +414,7 @@ class RegistrationSession:
             title = f"{where} (raw) at x={col}, y={row}"
         if spec is not None:
             L, s = spec
-            self.spectrum = (s, L.wavelengths, title) if np.any(np.isfinite(s)) else None
+            self.spectrum = (s, L.wavelengths, title)  # all NaN = not mapped: the plot says so
         self.cursor = (where, row, col)
         self.events.cursor.emit()
 
@@ -454,6 +475,8 @@ class RegistrationSession:
                 o["cmap"] = s.cmap
             if s.bands is not None and L.bands > 3:
                 o["bands"] = tuple(s.bands)
+            elif L.name in self.pca:
+                o["pca"] = self.pca[L.name]  # the export's false colour is the screen's
             opts[L.name] = o
         return opts
 

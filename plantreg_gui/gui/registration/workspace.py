@@ -64,6 +64,23 @@ class _EmptyNote(QLabel):
             self.raise_()
 
 
+def _check_is_rig_file(path: Path) -> None:
+    """Refuse a JSON file that is plainly something else (a recording manifest, a session, any JSON)
+    with "not a rig file" rather than a complaint about its missing cameras."""
+    import json
+
+    if not path.is_file():
+        return  # Rig.load names the missing file
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return  # Rig.load explains unreadable files
+    if isinstance(d, dict) and "cameras" not in d and d.get("format") != "plantreg.rig":
+        what = "a recording manifest" if path.name == MANIFEST else "a JSON file without \"cameras\""
+        raise InputError(f"not a rig file ({what}); a rig file lists the cameras with their intrinsics and "
+                         "extrinsics", path)
+
+
 # ---------------------------------------------------------------------- the widget
 class RegistrationWorkspace(QWidget):
     """See the module docstring. Signals: ``registered(result)`` after each registration,
@@ -328,6 +345,7 @@ class RegistrationWorkspace(QWidget):
         path = Path(path)
         if path.is_dir():
             raise InputError("is a folder, not a rig file: choose the rig's .json file", path)
+        _check_is_rig_file(path)
         rig = Rig.load(path)
         if self.session.plant is not None:
             # a plant of the data set has no rig of its own: the rig goes with a recording opened next
@@ -460,7 +478,8 @@ class RegistrationWorkspace(QWidget):
             overwrite = True
         inputs = {"rig": str(s.rig_path)} if s.rig_path else None
         w = Worker(write_outputs, s.result, s.rig, s.recording, out, overwrite=overwrite, inputs=inputs,
-                   what=what, display_options=s.export_display_options())
+                   what=what, display_options=s.export_display_options(),
+                   mosaic_tile=self.mosaic_view.tile.value())  # the export's mosaic is the screen's
         self._start(w, f"Exporting to {out}", self._exported, kind="export")
         return True
 
