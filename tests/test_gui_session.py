@@ -282,3 +282,31 @@ def test_hyperspectral_false_colour_is_the_same_raw_and_registered(demo_register
     assert ok.sum() > 1000
     # same spectrum, same colour: up to interpolation between neighbouring raw pixels
     assert np.median(np.abs(raw_rgb - reg_rgb)) <= 12
+
+
+@pytest.mark.gui
+def test_registration_parameters_in_the_gui(registered_workspace):
+    w = registered_workspace
+    s = w.session
+    assert s.registrar is not None
+    w.params_panel.edge.setValue(25.0)
+    w.params_panel.occlusion.setValue(5.0)
+    assert s.params.edge_angle_deg == 25.0 and s.params.occlusion_tol_m == pytest.approx(0.005)
+    assert s.registrar is None  # the meshes are rebuilt with the new edge angle at the next Register
+    assert "Register" in w.params_panel.note.text()
+
+
+@pytest.mark.gui
+def test_display_settings_are_remembered(registered_workspace, qtbot):
+    from plantreg_gui.gui.registration.model import DisplaySettings
+    from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
+
+    w = registered_workspace
+    w.controls.apply("thermal", DisplaySettings("magma", (10.0, 90.0)))
+    other = RegistrationWorkspace()  # same QSettings as the fixture's workspace
+    try:
+        assert other.remembered_display()["thermal"] == DisplaySettings("magma", (10.0, 90.0))
+        assert other._job_settings()["thermal"].cmap == "magma"
+    finally:
+        other.shutdown()
+        other.deleteLater()

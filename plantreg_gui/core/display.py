@@ -34,8 +34,6 @@ DEFAULT_CMAPS: dict[str, str] = {m.name: m.cmap for m in _modality.MODALITIES}
 #: Case-map and area-map overlay colours (code -> RGB), from :mod:`.cases`; codes without an
 #: overlay (P1, P6 background) are absent.
 CASE_COLOURS: dict[int, tuple[int, int, int]] = dict(cases.CASE_COLOURS)
-#: Optional colour for P1 (off by default: legitimate pixels need no mark).
-P1_COLOUR: tuple[int, int, int] = (255, 255, 255)
 AREA_COLOURS: dict[int, tuple[int, int, int]] = dict(cases.AREA_COLOURS)
 
 #: Legend labels per code (the same names as :mod:`.cases`).

@@ -128,12 +128,13 @@ def demo_job(folder: Path, settings, progress) -> dict:
     return out
 
 
-def register_job(registrar, rig: Rig, rec: Recording, target: str, settings, progress) -> dict:
-    """Register (reusing ``registrar``'s meshes), render the layers and build the point cloud."""
+def register_job(registrar, rig: Rig, rec: Recording, target: str, settings, progress, params=None) -> dict:
+    """Register (reusing ``registrar``'s meshes), render the layers and build the point cloud.
+    ``params`` (RegistrationParams) for a new registrar."""
     from ...core.register import Registrar
 
     if registrar is None:
-        registrar = Registrar(rig, rec)
+        registrar = Registrar(rig, rec, params)
     result = registrar.register(target, progress.sub(0.0, 0.85))
     layers = registered_layers(result, rig)
     pca = raw_pca(rec, rig, settings)
@@ -240,6 +241,7 @@ class RegistrationSession:
     home: tuple[float, float, float, float] | None = None    # object box in the target grid
     display: dict[str, DisplaySettings] = field(default_factory=dict)
     pca: dict[str, Any] = field(default_factory=dict)         # raw cubes' false-colour bases
+    params: Any = None                                        # core.register.RegistrationParams
     masks_source: str | None = None
     summary: str = ""                                          # HTML, see summary_html()
     cursor: tuple[str, int, int] | None = None                # (layer or "target", row, col)
@@ -249,6 +251,18 @@ class RegistrationSession:
     pending_target: str | None = None
     generation: int = 0
     events: SessionEvents = field(default_factory=SessionEvents, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.params is None:
+            from ...core.register import RegistrationParams
+
+            self.params = RegistrationParams()
+
+    def set_params(self, params: Any) -> None:
+        """New registration parameters for the next Register (the meshes are rebuilt with them)."""
+        if params != self.params:
+            self.params = params
+            self.registrar = None
 
     # ------------------------------------------------------------------ queries
     def settings_for(self, name: str) -> DisplaySettings:

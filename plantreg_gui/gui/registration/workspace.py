@@ -8,6 +8,7 @@ session's jobs (:class:`~plantreg_gui.gui.workers.Worker`), dialogs, recent file
 
 from __future__ import annotations
 
+import json
 import shutil
 import tempfile
 from pathlib import Path
@@ -28,10 +29,12 @@ from .display_controls import DisplayControls
 from .export_dialog import ExportDialog, folder_is_nonempty
 from .image_views import SpectrumPlot
 from .model import DisplaySettings
+from .params_panel import ParamsPanel
 from .session import RegistrationSession, demo_job, load_job, plant3d_job, register_job
 from .views import VIEWS, view_key
 
 RECENT_KEY = "workspace/recent"
+DISPLAY_KEY = "workspace/display"
 MAX_RECENT = 10
 
 
@@ -67,8 +70,6 @@ class _EmptyNote(QLabel):
 def _check_is_rig_file(path: Path) -> None:
     """Refuse a JSON file that is plainly something else (a recording manifest, a session, any JSON)
     with "not a rig file" rather than a complaint about its missing cameras."""
-    import json
-
     if not path.is_file():
         return  # Rig.load names the missing file
     try:
@@ -105,6 +106,7 @@ class RegistrationWorkspace(QWidget):
         ev.result.connect(self._result_changed)
         ev.cursor.connect(self._cursor_moved)
         ev.busy.connect(self._update_empty_notes)
+        ev.display.connect(self._remember_display)
 
     # ------------------------------------------------------------------ the session's state, for callers
     rig = property(lambda self: self.session.rig)
@@ -183,6 +185,7 @@ class RegistrationWorkspace(QWidget):
         self.tabs.currentChanged.connect(self._tab_changed)
 
         self.controls = DisplayControls()
+        self.controls.settings = self.session.display  # the session's settings, not a copy
         self.controls.changed.connect(self.session.set_display)
         self.spectrum = SpectrumPlot()
         self.summary = QLabel("")
@@ -193,6 +196,8 @@ class RegistrationWorkspace(QWidget):
         sl = QVBoxLayout(side)
         sl.setContentsMargins(4, 0, 0, 0)
         sl.addWidget(self.controls)
+        self.params_panel = ParamsPanel(self.session)
+        sl.addWidget(self.params_panel)
         self.spectrum_label = QLabel("Spectrum under the cursor")
         sl.addWidget(self.spectrum_label)
         sl.addWidget(self.spectrum)
@@ -337,7 +342,7 @@ class RegistrationWorkspace(QWidget):
         if folder.exists():
             shutil.rmtree(folder)
         self.session.pending_target = target or "ir"
-        self._start(Worker(demo_job, folder, dict(self.session.display)), "Preparing the demo",
+        self._start(Worker(demo_job, folder, self._job_settings()), "Preparing the demo",
                     self._loaded)
 
     def open_rig(self, path: str | Path) -> None:
@@ -371,7 +376,7 @@ class RegistrationWorkspace(QWidget):
                 if cand.is_file():
                     rig_path = cand
                     break
-        self._start(Worker(load_job, rig_path, path, self.session.rig, dict(self.session.display)),
+        self._start(Worker(load_job, rig_path, path, self.session.rig, self._job_settings()),
                     "Reading the recording", self._loaded)
 
     def open_plant3d(self, folder: str | Path, plant: str) -> None:
@@ -379,7 +384,7 @@ class RegistrationWorkspace(QWidget):
         folder = Path(folder)
         if plant not in plant3d.list_plants(folder):
             raise InputError(f"no plant '{plant}' in the data set", folder)
-        self._start(Worker(plant3d_job, folder, plant, dict(self.session.display)),
+        self._start(Worker(plant3d_job, folder, plant, self._job_settings()),
                     f"Reading {plant}", self._plant_loaded)
 
     def _loaded(self, out: dict) -> None:
@@ -424,7 +429,7 @@ class RegistrationWorkspace(QWidget):
         if s.busy_with("register"):
             return
         self.target_combo.setCurrentText(target)
-        w = Worker(register_job, s.registrar, s.rig, s.recording, target, dict(s.display))
+        w = Worker(register_job, s.registrar, s.rig, s.recording, target, dict(s.display), params=s.params)
         gen = s.generation
         self._start(w, f"Registering into {target}", lambda out: self._registered(out, gen), kind="register")
 
@@ -537,6 +542,35 @@ class RegistrationWorkspace(QWidget):
         except PlantregError as e:
             show_error(self, title, str(e))
         return None
+
+    # ------------------------------------------------------------------ display settings remembered
+    def _remember_display(self, name: str) -> None:
+        """Colour map and limits per camera name survive the session (QSettings), so the next
+        recording of the same rig is drawn the same way; band choices depend on the cube and are not kept."""
+        st = self.session.settings_for(name)
+        self._settings().setValue(f"{DISPLAY_KEY}/{name}", json.dumps({"cmap": st.cmap,
+                                                                         "percentiles": list(st.percentiles)}))
+
+    def remembered_display(self) -> dict[str, DisplaySettings]:
+        qs = self._settings()
+        qs.beginGroup(DISPLAY_KEY)
+        out = {}
+        for name in qs.childKeys():
+            try:
+                d = json.loads(str(qs.value(name)))
+                lo, hi = (float(x) for x in d["percentiles"])
+                if 0.0 <= lo < hi <= 100.0:
+                    out[name] = DisplaySettings(d.get("cmap") or None, (lo, hi))
+            except (ValueError, KeyError, TypeError):
+                continue  # a damaged entry is ignored, not fatal
+        qs.endGroup()
+        return out
+
+    def _job_settings(self) -> dict[str, DisplaySettings]:
+        """Display settings for a job that renders: this session's, else the remembered ones."""
+        for name, st in self.remembered_display().items():
+            self.session.display.setdefault(name, st)
+        return dict(self.session.display)
 
     # ------------------------------------------------------------------ file dialogs, recent, drops
     def _settings(self) -> QSettings:
