@@ -112,7 +112,9 @@ def test_views_show_the_session(registered_workspace):
     r = w.result
     w.set_view("side-by-side")
     for cam in r.registered:
-        expected = display.to_rgb8(r.registered[cam], modality=w.rig.camera(cam).modality)
+        raw = w.recording.images[cam]
+        pca = display.fit_pca(raw) if raw.ndim == 3 and raw.shape[2] > 4 else None  # the raw cube's basis
+        expected = display.to_rgb8(r.registered[cam], modality=w.rig.camera(cam).modality, pca=pca)
         np.testing.assert_array_equal(w.sbs_grid.views[cam].view.displayed(), expected)
     w.set_view("masks")
     assert w.masks_view.view.displayed().shape == (*r.shape, 3)
@@ -164,11 +166,14 @@ def test_inverted_percentile_limits_are_refused_visibly(registered_workspace, qt
     w = registered_workspace
     c = w.controls
     c.layer.setCurrentText("thermal")
-    before = w.session.settings_for("thermal")
-    c.hi.setValue(5.0)
-    c.lo.setValue(95.0)
+    c.hi.setValue(5.0)  # (1, 5): still valid, applied
+    qtbot.waitUntil(lambda: w.session.settings_for("thermal").percentiles == (1.0, 5.0))
+    qtbot.wait(100)
+    shown = w.sbs_grid.views["thermal"].view.displayed().copy()
+    c.lo.setValue(95.0)  # (95, 5): inverted
     qtbot.wait(200)  # past the 80 ms throttle
-    assert w.session.settings_for("thermal") == before
+    assert w.session.settings_for("thermal").percentiles == (1.0, 5.0)  # not bent into (95, 95.5)
+    np.testing.assert_array_equal(w.sbs_grid.views["thermal"].view.displayed(), shown)
     assert c.limits_note.isVisible()
     c.hi.setValue(99.0)
     c.lo.setValue(2.0)

@@ -107,7 +107,10 @@ def test_side_by_side_shows_display_rendering_of_registered_arrays(ws):
     assert ws.current_view() == "side-by-side"
     assert set(ws.sbs_grid.views) == set(r.registered) | {"depth"}
     for cam, arr in r.registered.items():
-        expected = display.to_rgb8(arr, modality=ws.rig.camera(cam).modality)
+        # a cube is drawn with its raw cube's PCA basis (the same colour raw and registered)
+        raw = ws.recording.images[cam]
+        pca = display.fit_pca(raw) if raw.ndim == 3 and raw.shape[2] > 4 else None
+        expected = display.to_rgb8(arr, modality=ws.rig.camera(cam).modality, pca=pca)
         np.testing.assert_array_equal(ws.sbs_grid.views[cam].view.displayed(), expected)
     z_mm = r.points_rig[..., 2] * 1000
     np.testing.assert_array_equal(ws.sbs_grid.views["depth"].view.displayed(),

@@ -7,31 +7,22 @@ thread; workers hand over numpy arrays (:class:`~.model.Cloud`).
 
 from __future__ import annotations
 
-import importlib
-import sys
-import threading
-
 import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
     QCheckBox, QComboBox, QHBoxLayout, QLabel, QSpinBox, QSplitter, QVBoxLayout, QWidget,
 )
 
+from ..workers import PREIMPORT
 from .model import Cloud
 
 MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
 
 
-_PREIMPORT: threading.Thread | None = None
-
-
-def _preimport_vtk() -> None:
-    """Import pyvista/VTK on a background thread once: importing them when the 3D tab is first
-    opened held the GUI thread for 1-5 s. Only the plotter itself must be made on the GUI thread."""
-    global _PREIMPORT
-    if _PREIMPORT is None and "pyvistaqt" not in sys.modules:
-        _PREIMPORT = threading.Thread(target=importlib.import_module, args=("pyvistaqt",), name="preimport-vtk")
-        _PREIMPORT.start()
+# pyvista/VTK take 1-5 s to import; imported on the GUI thread when the 3D tab was first opened
+# they froze it. The first worker job imports them instead (see workers.PREIMPORT).
+if "pyvistaqt" not in PREIMPORT:
+    PREIMPORT.append("pyvistaqt")
 
 
 class CloudView(QWidget):
@@ -91,7 +82,6 @@ class CloudView(QWidget):
         lay.addWidget(split, 1)
         self.colour.currentIndexChanged.connect(self._recolour)
         self.point_size.valueChanged.connect(self._resize_points)
-        _preimport_vtk()
 
     # ------------------------------------------------------------------ data
     def set_cloud(self, cloud: Cloud | None, meshes: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,

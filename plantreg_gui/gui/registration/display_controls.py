@@ -139,16 +139,18 @@ class DisplayControls(QGroupBox):
             return
         bands = tuple(sb.value() for sb in self.bands) if self.mode.currentData() == "bands" else None
         self.band_row.setEnabled(bands is not None)
-        self.settings[name] = DisplaySettings(self.cmap.currentData(), (lo, hi), bands)
+        # the owner (the workspace's session) stores it when the throttled signal arrives
+        self._pending = (name, DisplaySettings(self.cmap.currentData(), (lo, hi), bands))
         self._timer.start()
 
     def _emit(self) -> None:
-        name = self.layer.currentText()
-        self.changed.emit(name, self.settings_for(name))
+        pending, self._pending = getattr(self, "_pending", None), None
+        if pending is not None:
+            self.changed.emit(*pending)
 
     # for tests and scripted use
     def apply(self, name: str, settings: DisplaySettings) -> None:
-        self.settings[name] = settings
+        self.changed.emit(name, settings)  # the owner stores it (the workspace: session.set_display)
+        self.settings.setdefault(name, settings)  # a panel without an owner keeps it itself
         if self.layer.currentText() == name:
             self._show_layer()
-        self.changed.emit(name, settings)
