@@ -250,6 +250,7 @@ class RegistrationWorkspace(QWidget):
     def _source_changed(self) -> None:
         s = self.session
         self._fill_targets()
+        self.params_panel.setEnabled(s.can_register())  # nothing to tune without a rig and a recording
         if s.plant is not None:
             p = s.plant
             missing = f" Not in the data set: {', '.join(p.missing)}." if p.missing else ""
