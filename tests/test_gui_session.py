@@ -315,3 +315,21 @@ def test_display_settings_are_remembered(registered_workspace, qtbot):
     finally:
         other.shutdown()
         other.deleteLater()
+
+
+@pytest.mark.gui
+def test_colour_bars_give_the_limits_in_units(registered_workspace, qtbot):
+    from plantreg_gui.core import display
+    from plantreg_gui.gui.registration.model import DisplaySettings
+
+    w = registered_workspace
+    r = w.result
+    bar = w.sbs_grid.views["thermal"].bar
+    assert not bar.isHidden() and bar.cmap == "RdBu_r"
+    np.testing.assert_allclose(bar.limits, display.auto_limits(r.registered["thermal"], (1, 99)))
+    assert bar.hi.text().endswith("°C")
+    w.controls.apply("thermal", DisplaySettings("magma", (5.0, 95.0)))
+    assert bar.cmap == "magma"
+    np.testing.assert_allclose(bar.limits, display.auto_limits(r.registered["thermal"], (5, 95)))
+    assert w.sbs_grid.views["rgb"].bar.isHidden()  # a colour image has no colour bar
+    assert not w.raw_grid.views["thermal"].bar.isHidden()

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
-from PySide6.QtGui import QColor, QImage, QPainter, QPen, QTransform
+from PySide6.QtGui import QColor, QImage, QPainter, QPen, QPixmap, QTransform
 from PySide6.QtWidgets import (
-    QFrame, QGraphicsItem, QGraphicsLineItem, QGraphicsScene, QGraphicsView, QGridLayout, QLabel,
+    QFrame, QGraphicsItem, QGraphicsLineItem, QGraphicsScene, QGraphicsView, QGridLayout, QHBoxLayout, QLabel,
     QSizePolicy, QVBoxLayout, QWidget,
 )
 
@@ -236,8 +236,46 @@ class TitledView(QWidget):
         self.label = QLabel(title)
         self.label.setStyleSheet("font-weight: bold;")
         self.view = ImageView(title)
-        lay.addWidget(self.label)
+        self.bar = ColourBar()
+        top = QHBoxLayout()
+        top.setContentsMargins(0, 0, 0, 0)
+        top.addWidget(self.label, 1)
+        top.addWidget(self.bar)
+        lay.addLayout(top)
         lay.addWidget(self.view, 1)
+
+
+class ColourBar(QWidget):
+    """A colour map's gradient with its limits in the image's unit, e.g. ``18.2 [▆▆▆] 26.1 °C``
+    (what a colour means is part of the picture); hidden for colour and multi-band images."""
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.setSpacing(3)
+        self.lo, self.ramp, self.hi = QLabel(""), QLabel(), QLabel("")
+        for w in (self.lo, self.ramp, self.hi):
+            lay.addWidget(w)
+        self.cmap: str | None = None
+        self.limits: tuple[float, float] | None = None
+        self.hide()
+
+    def set_bar(self, cmap: str | None, limits: tuple[float, float] | None, unit: str = "") -> None:
+        self.cmap, self.limits = cmap, limits
+        if cmap is None or limits is None:
+            self.hide()
+            return
+        from ...core import display
+
+        lut = display.colormap_lut(cmap)
+        ramp = np.ascontiguousarray(np.repeat(lut[None, :, :], 10, axis=0))
+        img = QImage(ramp.data, 256, 10, 256 * 3, QImage.Format.Format_RGB888).scaled(110, 10)
+        self.ramp.setPixmap(QPixmap.fromImage(img))
+        fmt = (lambda v: f"{v:.1f}") if max(abs(limits[0]), abs(limits[1])) < 1000 else (lambda v: f"{v:.0f}")
+        self.lo.setText(fmt(limits[0]))
+        self.hi.setText(fmt(limits[1]) + (f" {unit}" if unit else ""))
+        self.show()
 
 
 class ViewGrid(QWidget):
@@ -367,10 +405,13 @@ class RawImagesView(ViewGrid):
         self.set_layers([L.name for L in s.raw], {L.name: s.layer_title(L, raw=True) for L in s.raw})
         for L in s.raw:
             self.set_image(L.name, s.raw_renders[L.name])
+            self.views[L.name].bar.set_bar(*s.colour_bar(L))
 
     def _display(self, name: str) -> None:
-        if name in self.views and name in self.session.raw_renders:
+        L = self.session.layer(name, registered=False)
+        if name in self.views and L is not None:
             self.set_image(name, self.session.raw_renders[name])
+            self.views[name].bar.set_bar(*self.session.colour_bar(L))
 
 
 class SideBySideView(ViewGrid):
@@ -391,11 +432,14 @@ class SideBySideView(ViewGrid):
         self.set_layers([L.name for L in s.layers], {L.name: s.layer_title(L) for L in s.layers})
         for L in s.layers:
             self.set_image(L.name, s.renders[L.name])
+            self.views[L.name].bar.set_bar(*s.colour_bar(L))
         self.set_home(home_rect(s.home))
 
     def _display(self, name: str) -> None:
-        if name in self.views and name in self.session.renders:
+        L = self.session.layer(name)
+        if name in self.views and L is not None:
             self.set_image(name, self.session.renders[name])
+            self.views[name].bar.set_bar(*self.session.colour_bar(L))
 
     def _cursor(self) -> None:
         c = self.session.cursor

@@ -470,6 +470,16 @@ class RegistrationSession:
     def summary_html(self) -> str:
         return self.summary
 
+    def colour_bar(self, L: Layer) -> tuple[str | None, tuple[float, float] | None, str]:
+        """(colour map, (lo, hi) limits in the layer's unit, unit) of a single-band layer as drawn;
+        (None, None, '') for colour and multi-band images (no colour bar)."""
+        if L.bands != 1:
+            return None, None, ""
+        from ...core import display
+
+        st = self.settings_for(L.name)
+        return st.cmap or modality.default_cmap(L.modality), display.auto_limits(L.data, st.percentiles), L.unit
+
     def layer_title(self, L: Layer, raw: bool = False) -> str:
         h, w = L.data.shape[:2]
         unit = f", {L.unit}" if L.unit else ""
