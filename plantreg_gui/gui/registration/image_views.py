@@ -236,12 +236,10 @@ class TitledView(QWidget):
         self.label = QLabel(title)
         self.label.setStyleSheet("font-weight: bold;")
         self.view = ImageView(title)
+        self.label.setMinimumWidth(40)  # a long title is cut, never widens the grid
         self.bar = ColourBar()
-        top = QHBoxLayout()
-        top.setContentsMargins(0, 0, 0, 0)
-        top.addWidget(self.label, 1)
-        top.addWidget(self.bar)
-        lay.addLayout(top)
+        lay.addWidget(self.label)
+        lay.addWidget(self.bar)  # its own row: beside the title it squeezed the title and the side panel
         lay.addWidget(self.view, 1)
 
 
@@ -256,7 +254,9 @@ class ColourBar(QWidget):
         lay.setSpacing(3)
         self.lo, self.ramp, self.hi = QLabel(""), QLabel(), QLabel("")
         for w in (self.lo, self.ramp, self.hi):
+            w.setStyleSheet("font-size: 11px;")
             lay.addWidget(w)
+        lay.addStretch(1)
         self.cmap: str | None = None
         self.limits: tuple[float, float] | None = None
         self.hide()
@@ -270,7 +270,7 @@ class ColourBar(QWidget):
 
         lut = display.colormap_lut(cmap)
         ramp = np.ascontiguousarray(np.repeat(lut[None, :, :], 10, axis=0))
-        img = QImage(ramp.data, 256, 10, 256 * 3, QImage.Format.Format_RGB888).scaled(110, 10)
+        img = QImage(ramp.data, 256, 10, 256 * 3, QImage.Format.Format_RGB888).scaled(160, 10)
         self.ramp.setPixmap(QPixmap.fromImage(img))
         fmt = (lambda v: f"{v:.1f}") if max(abs(limits[0]), abs(limits[1])) < 1000 else (lambda v: f"{v:.0f}")
         self.lo.setText(fmt(limits[0]))
