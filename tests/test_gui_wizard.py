@@ -69,7 +69,7 @@ def test_demo_session_first_page_to_saved_rig(qtbot, demo_dir, tmp_path):
 def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
     from plantreg_gui.core.calibration import Session
     from plantreg_gui.core.rig import Rig
-    from plantreg_gui.core.synthetic import demo_rig
+    from plantreg_gui.core.synthetic import GROUND_Z, demo_rig
 
     truth = demo_rig()
     folder = tmp_path / "session"
@@ -89,6 +89,8 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
         assert not rp.apply_btn.isEnabled()
         rp.columns.setValue(s.board.columns)
         assert "⚠" not in rp.message.text()
+        hs = s.camera_names.index("hyperspectral")  # units and bands are shown (and editable)
+        assert rp.cameras.item(hs, 3).text() == "400-1000/100" and rp.cameras.item(hs, 2).text() == "reflectance"
 
         # --- page 2: detection fills the capture table
         qtbot.mouseClick(w.next_btn, Qt.MouseButton.LeftButton)
@@ -139,7 +141,12 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
             assert abs(K[0, 0] / cam.K[0, 0] - 1) < 0.01, cam.name
             assert abs(K[1, 1] / cam.K[1, 1] - 1) < 0.01, cam.name
         assert set(ip.chart.bars) == set(truth.names)
-        assert rejected[0] not in ip.chart.bars["rgb"]  # excluded views are not calibrated
+        assert rejected[0] not in ip.chart.bars["rgb"]  # excluded views are not calibrated ...
+        # ... but stay on the chart, marked, with their error under the final model (sub-pixel on
+        # the rendered demo: it was a good view)
+        assert 0 < ip.chart.excluded_bars["rgb"][rejected[0]] < 1.0
+        assert "⊘" in rv.list.currentItem().text() or any(
+            "⊘" in rv.list.item(i).text() for i in range(rv.list.count()))
         assert all(math.isfinite(v) and v >= 0 for bars in ip.chart.bars.values() for v in bars.values())
         pose = ip.chart.tallest("ir")
         qtbot.mouseClick(ip.chart, Qt.MouseButton.LeftButton, pos=ip.chart.bar_center("ir", pose).toPoint())
@@ -164,11 +171,37 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
         dnums = _cell_numbers(dp.table)
         assert dnums and all(math.isfinite(v) for v in dnums)
         assert dp.views.rowCount() > 0
+        # per-view cells (defect 9): px and normalised shown, coloured by the normalised one, legend
+        from plantreg_gui.gui.calibration.widgets import grade_colour
+
+        cells = [dp.views.item(i, j) for i in range(dp.views.rowCount()) for j in range(1, dp.views.columnCount())]
+        cells = [c for c in cells if c is not None and c.text().endswith("norm.")]
+        assert cells
+        for cell in cells:
+            px, nn = (float(x.split()[0]) for x in cell.text().split("\n"))
+            assert px > 0 and nn > 0 and cell.background().color() == grade_colour(nn)
+        assert dp.views_legend.isVisible() and "normalised" in dp.views_legend.text()
 
         # --- page 7: ROI, save; the files against the truth
         qtbot.mouseClick(w.next_btn, Qt.MouseButton.LeftButton)
         _idle(qtbot, w)
         sp = w.pages[6]
+        # the ROI comes from a plant, not from a board pose (defect 1): a board pose cannot set it
+        assert sp.source()[0] == "pose" and not sp.fit_btn.isEnabled() and not sp.fit_roi()
+        assert "Load plant depth map" in sp.roi_msg.text()
+        plant = calibration_session.parent / "recording"
+        assert sp.load_plant_depth(plant / "recording.json")
+        assert sp.source() == ("plant", str(plant / "depth.png")) and sp.fit_btn.isEnabled()
+        lo, hi = sp.roi()
+        assert GROUND_Z - 0.06 < hi[2] < GROUND_Z  # the ground plane just in front of the true ground
+        qtbot.waitUntil(lambda: getattr(sp, "preview_rgb", None) is not None, timeout=5000)
+        # page 7's colours (defect 8): red marks only the outside of the ROI, never depth inside it
+        sp.set_roi([-0.4, -0.35, 0.3], [0.4, 0.35, 0.56])  # a box around a board: cuts the plant
+        qtbot.waitUntil(lambda: "leaves out" in sp.roi_msg.text(), timeout=5000)
+        rgb = sp.preview_rgb.astype(int)
+        red = (rgb[:, :, 0] > rgb[:, :, 1] + 60) & (rgb[:, :, 0] > rgb[:, :, 2] + 60)
+        assert red.any() and not (red & sp.preview_inside).any()
+        assert not (red & ~sp.preview_outside).any()
         sp.set_roi([-0.4, -0.35, 0.3], [0.4, 0.35, 1.15])
         qtbot.waitUntil(lambda: 0.0 < sp.inside_fraction <= 1.0, timeout=5000)
         out = tmp_path / "out"
@@ -182,6 +215,9 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
         np.testing.assert_allclose(rig.roi_max, [0.4, 0.35, 1.15])
         for cam in truth.cameras:
             got = rig.camera(cam.name)
+            # camera metadata survives the wizard (defect 3): units and band wavelengths
+            for key in ("units", "bands"):
+                assert got.extra.get(key) == cam.extra.get(key), (cam.name, key)
             assert abs(got.K[0, 0] / cam.K[0, 0] - 1) < 0.01
             assert np.linalg.norm(got.center_rig - cam.center_rig) < 0.01  # metres
         rep = json.loads((out / "report.json").read_text())
@@ -313,7 +349,13 @@ def test_create_session_add_poses_by_drop_and_remove(qtbot, shared_data, tmp_pat
         assert "used twice" in rp.message.text() and not rp.new_btn.isEnabled()
         rp.cameras.removeRow(2)
         rp._changed()
+        rp.cameras.item(0, 3).setText("blue, green")  # bands: wavelengths in nm, or FIRST-LAST/COUNT
+        assert "bands" in rp.message.text() and not rp.new_btn.isEnabled()
+        rp.cameras.item(0, 3).setText("450-650/3")
+        rp.cameras.item(0, 2).setText("DN")
         assert rp.create_session(tmp_path / "new")
+        cam0 = json.loads((tmp_path / "new" / "session.json").read_text())["cameras"]["left"]
+        assert cam0["units"] == "DN" and cam0["bands"] == [450.0, 550.0, 650.0]
         assert (tmp_path / "new" / "session.json").is_file()
         w.go_to_page(2)
         cp = w.pages[1]
@@ -438,3 +480,31 @@ def test_load_demo_writes_only_the_calibration_session(qtbot, demo_dir, tmp_path
     finally:
         w.cancel()
         _close(w)
+
+
+def test_screenshot_of_page_1_does_not_wait_for_detection(qtbot, shared_data, tmp_path):
+    """``--session S --page 1 --screenshot`` (defect 17): page 1 needs no detection, so the
+    screenshot is taken while the detection still runs in the background."""
+    from argparse import Namespace
+
+    from plantreg_gui.gui.main_window import MainWindow
+
+    folder = tmp_path / "stereo"
+    shutil.copytree(shared_data / "opencv-stereo", folder)
+    win = MainWindow()
+    qtbot.addWidget(win)
+    win.resize(1200, 800)
+    win.show()
+    try:
+        win.apply_start_options(Namespace(calibrate_demo=False, session=folder, page=1, demo=False, rig=None,
+                                          recording=None, target=None, view=None))
+        w = win.wizard
+        assert w.page == 1 and w.is_busy() and not w.page_busy()
+        out = tmp_path / "page1.png"
+        win.screenshot_when_idle(out, timeout=600)
+        qtbot.waitUntil(out.is_file, timeout=600_000)
+        assert not w.model.detections_complete()  # taken before detection ended
+        w.go_to_page(2)
+        assert w.page_busy()  # page 2 shows the detections: it waits for them
+    finally:
+        win.close()  # closeEvent shuts both views down (cancels the detection)

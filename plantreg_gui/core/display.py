@@ -100,6 +100,10 @@ def auto_limits(img: np.ndarray, percentiles: tuple[float, float] = (1, 99),
 @lru_cache(maxsize=64)
 def colormap_lut(name: str) -> np.ndarray:
     """(256, 3) uint8 lookup table of a matplotlib colour map."""
+    from .cmap_tables import TABLES
+
+    if name in TABLES:  # the common maps without importing matplotlib (start-up of a pipeline)
+        return np.frombuffer(bytes.fromhex(TABLES[name]), dtype=np.uint8).reshape(256, 3).copy()
     import matplotlib
 
     cmap = matplotlib.colormaps[name]
@@ -282,6 +286,16 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
     ``mask`` (H, W) bool selects the pixels the statistics are taken from (e.g. the object);
     every pixel is still drawn. NaN pixels are drawn in :data:`BACKGROUND_RGB`.
     """
+    from .hits import HitImage
+
+    if isinstance(img, HitImage):  # render the hits only (statistics are of finite pixels anyway)
+        sub = np.asarray(mask, dtype=bool).reshape(-1)[img.index][:, None] if mask is not None else None
+        vals = img.values[:, None, :] if img.ndim == 3 else img.values
+        rgb = to_rgb8(vals, modality, cmap, limits, percentiles, bands, sub)
+        out = np.empty((img.shape[0] * img.shape[1], 3), np.uint8)
+        out[:] = BACKGROUND_RGB
+        out[img.index] = rgb.reshape(-1, 3)
+        return out.reshape(img.shape[0], img.shape[1], 3)
     a = np.asarray(img)
     mod = _modality.get(modality)
     if a.ndim == 3 and a.shape[2] == 1:

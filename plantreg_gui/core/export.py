@@ -1,9 +1,12 @@
 """Write a registration result to an output folder (the layout ``plantreg register --out`` promises).
 
 ```
-OUT/registered/<camera>.tif   float32, target H x W (x bands), NaN where not mapped
+OUT/registered/<camera>.tif   float32, target H x W (x bands), NaN where not mapped; tiled, lossless
+                              deflate + floating-point predictor (imageio.TIFF_CODECS)
 OUT/registered/<camera>.png   display preview (colour map / PCA false colour, contrast stretched)
 OUT/cases/<camera>.png        uint8 case code per target pixel, every source camera
+OUT/cases/<camera>_edge.png   uint8 255 = P1 pixel flagged mixed (footprint across a silhouette), else 0
+OUT/flying.png                uint8 255 = depth pixel detected as flying (depth camera's grid), else 0
 OUT/areas.png                 uint8 area code per target pixel (4 = P4, 5 = P5, 6 = P6)
 OUT/pointcloud.ply            object-mesh hits (rig frame) with every camera's values + RGB colour
 OUT/mosaic.png                tiles alternating the modalities' previews
@@ -30,18 +33,39 @@ import numpy as np
 from .. import __version__
 from . import display, modality
 from .errors import InputError
-from .imageio import atomic_output_dir, atomic_path_suffixed, atomic_write_text, write_png, write_tiff
+from .imageio import (TIFF_CODEC_DEFAULT, atomic_output_dir, atomic_path_suffixed, atomic_write_text,
+                      dense_tiles, write_png, write_tiff_tiled)
 from .progress import Reporter, ensure_reporter
 from .recording import Recording
+from .hits import HitImage
 from .register import AREA_NAMES, CASE_NAMES, RegistrationResult
 from .rig import Rig
 
 SUMMARY_FORMAT = "plantreg.summary"
-SUMMARY_VERSION = 1
+SUMMARY_VERSION = 2  # 2: "tof" (flying pixels, mixed-pixel flags), parameters of the depth clean-up
 
 #: Selectable parts of the output (``what``): float TIFFs, display PNGs, case maps, area map,
 #: point cloud, mosaic, summary.
-OUTPUTS = ("registered", "previews", "cases", "areas", "pointcloud", "mosaic", "summary")
+OUTPUTS = ("registered", "previews", "cases", "edges", "areas", "pointcloud", "mosaic", "summary")
+
+#: Other names accepted by :func:`parse_outputs` (the command line says ``ply``).
+OUTPUT_ALIASES = {"ply": "pointcloud"}
+
+
+def parse_outputs(text: str | Iterable[str] | None) -> tuple[str, ...]:
+    """``"registered,cases,ply"`` (or a list) -> the :data:`OUTPUTS` parts, in :data:`OUTPUTS` order;
+    None or ``"all"`` -> all. Unknown names raise :class:`InputError`."""
+    if text is None:
+        return OUTPUTS
+    words = [w.strip() for w in (text.split(",") if isinstance(text, str) else text) if w.strip()]
+    if words == ["all"]:
+        return OUTPUTS
+    parts = {OUTPUT_ALIASES.get(w, w) for w in words}
+    unknown = sorted(w for w in words if OUTPUT_ALIASES.get(w, w) not in OUTPUTS)
+    if unknown or not parts:
+        choices = ",".join(["registered", "cases", "edges", "areas", "ply", "previews", "mosaic", "summary"])
+        raise InputError(f"--outputs: unknown part(s) {', '.join(unknown) or '(none given)'}; choose from {choices} or all")
+    return tuple(o for o in OUTPUTS if o in parts)
 
 #: PLY vertex properties that are not camera values.
 _PLY_FIXED = ("x", "y", "z", "red", "green", "blue", "row", "col")
@@ -57,6 +81,7 @@ def write_outputs(
     inputs: dict[str, Any] | None = None,
     what: Iterable[str] | None = None,
     display_options: Mapping[str, Mapping[str, Any]] | None = None,
+    tiff_codec: str = TIFF_CODEC_DEFAULT,
     mosaic_tile: int | None = None,
 ) -> Path:
     """Write ``result`` into the folder ``out`` (layout in the module docstring); returns ``out``.
@@ -65,15 +90,17 @@ def write_outputs(
     recording's own paths are added automatically). ``what`` selects a subset of
     :data:`OUTPUTS` (default: all). ``display_options`` maps a camera name to keyword
     arguments of :func:`display.to_rgb8` (cmap, limits, percentiles, bands) for the previews,
-    the mosaic and the point-cloud colours, so an export looks like the GUI's view;
-    ``mosaic_tile`` the mosaic's tile size in pixels (default :func:`display.default_tile`).
+    the mosaic and the point-cloud colours, so an export looks like the GUI's view.
+    ``tiff_codec``: the registered TIFFs' lossless compression (:data:`~.imageio.TIFF_CODECS`).
+    ``mosaic_tile`` the mosaic's tile size in pixels (default :func:`display.default_tile`; the
+    workspace passes its screen's tile).
 
     Raises :class:`InputError` if ``out`` exists and is not empty and ``overwrite`` is False;
     :class:`~plantreg_gui.core.errors.Cancelled` if cancelled through ``progress`` (nothing is
     left at ``out`` then).
     """
     rep = ensure_reporter(progress)
-    sel = set(OUTPUTS) if what is None else set(what)
+    sel = set(OUTPUTS) if what is None else {OUTPUT_ALIASES.get(w, w) for w in what}
     unknown = sel - set(OUTPUTS)
     if unknown:
         raise ValueError(f"unknown output parts {sorted(unknown)}; choose from {OUTPUTS}")
@@ -101,6 +128,8 @@ def write_outputs(
         steps += [(f"previews:{c}", 1.0 + 0.01 * _bands(result.registered[c])) for c in cams]
     if "cases" in sel:
         steps += [(f"cases:{c}", 0.3) for c in result.cases]
+    if "edges" in sel:
+        steps += edge_steps(result)
     if "areas" in sel:
         steps.append(("areas", 0.3))
     if "pointcloud" in sel:
@@ -122,13 +151,20 @@ def write_outputs(
             t0 = time.perf_counter()
             if kind == "registered":
                 rel = f"registered/{_safe(cam)}.tif"
-                write_tiff(tmp / rel, np.asarray(result.registered[cam], dtype=np.float32))
+                reg = result.registered[cam]  # tiled, compressed, empty tiles encoded once
+                if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
+                    write_tiff_tiled(tmp / rel, reg.shape, np.float32, reg.block, codec=tiff_codec)
+                else:
+                    reg = np.asarray(reg, dtype=np.float32)
+                    write_tiff_tiled(tmp / rel, reg.shape, np.float32, dense_tiles(reg), codec=tiff_codec)
             elif kind == "previews":
                 rel = f"registered/{_safe(cam)}.png"
                 write_png(tmp / rel, preview(cam))
             elif kind == "cases":
                 rel = f"cases/{_safe(cam)}.png"
                 write_png(tmp / rel, np.asarray(result.cases[cam], dtype=np.uint8))
+            elif kind in ("edges", "flying"):
+                rel = write_edge_step(tmp, result, kind, cam)
             elif kind == "areas":
                 rel = "areas.png"
                 write_png(tmp / rel, np.asarray(result.area, dtype=np.uint8))
@@ -168,6 +204,44 @@ def check_output_spares_inputs(out: str | Path, inputs: Iterable[str | Path]) ->
                              "outside the recording and the rig file's folder", out)
 
 
+# ---------------------------------------------------------------------- mixed-pixel and flying-pixel masks
+def edge_steps(result: RegistrationResult) -> list[tuple[str, float]]:
+    """Export steps of the ToF masks: ``edges:<cam>`` per source with a mixed flag, ``flying``."""
+    steps = [(f"edges:{c}", 0.3) for c in result.mixed]
+    if result.flying is not None:
+        steps.append(("flying", 0.2))
+    return steps
+
+
+def write_edge_step(folder: Path, result: RegistrationResult, kind: str, cam: str) -> str:
+    """Write ``cases/<cam>_edge.png`` (kind ``edges``) or ``flying.png`` into ``folder``; returns
+    the relative path. Masks are uint8, 255 = flagged, so any viewer shows them."""
+    if kind == "edges":
+        rel = f"cases/{_safe(cam)}_edge.png"
+        mask = np.asarray(result.mixed[cam], dtype=bool)
+    else:
+        rel = "flying.png"
+        mask = np.asarray(result.flying, dtype=bool)
+    write_png(folder / rel, np.where(mask, 255, 0).astype(np.uint8))
+    return rel
+
+
+def tof_summary(result: RegistrationResult) -> dict[str, Any]:
+    """The ``tof`` block of ``summary.json``: flying-pixel count, per-source mixed-pixel counts."""
+    fly = result.flying
+    n_depth = int(np.asarray(fly).size) if fly is not None else 0
+    n_fly = int(np.count_nonzero(fly)) if fly is not None else 0
+    mixed = {}
+    for cam, m in result.mixed.items():
+        n_p1 = int(np.count_nonzero(np.asarray(result.cases[cam]) == 1)) if cam in result.cases else 0
+        n_m = int(np.count_nonzero(m))
+        mixed[cam] = {"pixels": n_m, "percent_of_p1": round(100.0 * n_m / n_p1, 3) if n_p1 else 0.0}
+    return {"flying_pixels": n_fly, "flying_percent_of_depth": round(100.0 * n_fly / n_depth, 4) if n_depth else 0.0,
+            "flying_handling": ("repaired" if getattr(result.params, "flying_repair", True) else "removed")
+            if getattr(result.params, "flying_filter", False) else "off",
+            "mixed": mixed}
+
+
 # ---------------------------------------------------------------------- registered images
 # ---------------------------------------------------------------------- point cloud
 def ply_property_names(result: RegistrationResult, cams: list[str] | None = None) -> dict[str, list[str]]:
@@ -180,7 +254,7 @@ def ply_property_names(result: RegistrationResult, cams: list[str] | None = None
         if base in used or base.lower() in used:
             base = f"{base}_value"
         b = _bands(result.registered[cam])
-        props = [base] if np.asarray(result.registered[cam]).ndim == 2 else [f"{base}_b{i:03d}" for i in range(b)]
+        props = [base] if len(result.registered[cam].shape) == 2 else [f"{base}_b{i:03d}" for i in range(b)]
         props = [p if p not in used else f"{p}_{len(used)}" for p in props]
         used.update(props)
         names[cam] = props
@@ -194,16 +268,16 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
     Vertex properties: ``x, y, z`` float32 (rig frame, metres); ``red, green, blue`` uchar from
     ``colours_rgb8`` (H, W, 3) (a display rendering); ``row, col`` int32 (the target pixel);
     per camera its registered value(s) as float32 (NaN where that camera is not mapped); per
-    source camera ``<cam>_case`` uchar (the case code). Points with NaN coordinates are dropped.
+    source camera ``<cam>_case`` uchar (the case code) and ``<cam>_mixed`` uchar (1 = flagged mixed).
+    Points with NaN coordinates are dropped.
     """
-    from plyfile import PlyData, PlyElement
-
     rep = ensure_reporter(progress)
     cams = list(result.registered) if cams is None else cams
     pts = np.asarray(result.points_rig, dtype=np.float32)
     H, W = result.shape
     ok = np.isfinite(pts).all(axis=2)
-    rows, cols = np.nonzero(ok)
+    flat = np.flatnonzero(ok.ravel())
+    rows, cols = np.divmod(flat, W)
     n = rows.size
     names = ply_property_names(result, cams)
     dtype: list[tuple[str, str]] = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
@@ -220,32 +294,64 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
         used.add(p)
         case_props[cam] = p
         dtype.append((p, "u1"))
-    v = np.empty(n, dtype=dtype)
-    sel = pts[rows, cols]
-    v["x"], v["y"], v["z"] = sel[:, 0], sel[:, 1], sel[:, 2]
-    if colours_rgb8 is not None:
-        c = np.asarray(colours_rgb8)[rows, cols]
-        v["red"], v["green"], v["blue"] = c[:, 0], c[:, 1], c[:, 2]
-    else:
-        v["red"] = v["green"] = v["blue"] = 200
-    v["row"], v["col"] = rows, cols
-    for k, cam in enumerate(cams):
-        rep(0.8 * k / max(len(cams), 1), f"point cloud: {cam}")
-        vals = np.asarray(result.registered[cam], dtype=np.float32)[rows, cols]
-        if vals.ndim == 1:
-            v[names[cam][0]] = vals
-        else:
-            for b, p in enumerate(names[cam]):
-                v[p] = vals[:, b]
-    for cam, p in case_props.items():
-        v[p] = np.asarray(result.cases[cam], dtype=np.uint8)[rows, cols]
-    rep(0.85, "point cloud: writing")
-    el = PlyElement.describe(v, "vertex")
+    mixed_props: dict[str, str] = {}
+    for cam in getattr(result, "mixed", {}):
+        p = f"{_ply_name(cam)}_mixed"
+        while p in used:
+            p += "_"
+        used.add(p)
+        mixed_props[cam] = p
+        dtype.append((p, "u1"))
+    dt = np.dtype(dtype)  # packed records, the PLY binary layout
+    comment = (f"plantreg {__version__}: object-mesh hits of target '{result.target}' rays, "
+               f"rig frame, metres; target image {W}x{H}")
+    ply_types = {"<f4": "float", "u1": "uchar", "<i4": "int"}
+    header = ["ply", "format binary_little_endian 1.0", f"comment {comment}", f"element vertex {n}"]
+    header += [f"property {ply_types[t]} {name}" for name, t in dtype]
+    header.append("end_header")
+    # records are packed and written in chunks of ~64 MB: a 4K target's hits with 204 bands
+    # would otherwise need the whole cloud (and its values) in memory twice
+    step = max(1024, (64 << 20) // dt.itemsize)
     with atomic_path_suffixed(path) as tmp:
-        PlyData([el], text=False, byte_order="<",
-                comments=[f"plantreg {__version__}: object-mesh hits of target '{result.target}' rays, "
-                          f"rig frame, metres; target image {W}x{H}"]).write(str(tmp))
+        with open(tmp, "wb") as f:
+            f.write(("\n".join(header) + "\n").encode("ascii"))
+            for a in range(0, n, step):
+                rep(0.95 * a / max(n, 1), "point cloud")
+                f.write(_ply_records(result, cams, names, case_props, dt, colours_rgb8, pts, flat[a : a + step],
+                                     rows[a : a + step], cols[a : a + step], mixed_props).data)
+    rep(1.0, "point cloud")
     return n
+
+
+def _ply_records(result: RegistrationResult, cams: list[str], names: dict[str, list[str]],
+                 case_props: dict[str, str], dt: np.dtype, colours_rgb8: np.ndarray | None, pts: np.ndarray,
+                 flat: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                 mixed_props: dict[str, str] | None = None) -> np.ndarray:
+    """The packed PLY records (m, itemsize) uint8 of the hits at row-major pixel indices ``flat`` (m,)."""
+    H, W = result.shape
+    m = len(flat)
+    raw = np.empty((m, dt.itemsize), dtype=np.uint8)
+    v = raw.view(dt).reshape(m)
+
+    def columns(first: str, k: int, typ: str) -> np.ndarray:
+        """(m, k) view of ``k`` consecutive properties starting at ``first`` (one copy per camera,
+        not one Python-level assignment per band)."""
+        off = dt.fields[first][1]
+        return np.ndarray((m, k), dtype=typ, buffer=raw, offset=off, strides=(dt.itemsize, np.dtype(typ).itemsize))
+
+    columns("x", 3, "<f4")[:] = pts.reshape(-1, 3)[flat]
+    if colours_rgb8 is not None:
+        columns("red", 3, "u1")[:] = np.asarray(colours_rgb8).reshape(-1, 3)[flat]
+    else:
+        columns("red", 3, "u1")[:] = 200
+    v["row"], v["col"] = rows, cols
+    for cam in cams:
+        columns(names[cam][0], len(names[cam]), "<f4")[:] = _values_at(result.registered[cam], flat, H * W)
+    for cam, p in case_props.items():
+        v[p] = np.asarray(result.cases[cam], dtype=np.uint8).reshape(-1)[flat]
+    for cam, p in (mixed_props or {}).items():
+        v[p] = np.asarray(result.mixed[cam], dtype=np.uint8).reshape(-1)[flat]
+    return raw
 
 
 # ---------------------------------------------------------------------- summary
@@ -273,14 +379,18 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
              for c in sorted(AREA_NAMES)}
     cameras = {}
     for cam in _camera_order(result, rig):
-        reg = np.asarray(result.registered[cam])
-        mapped = np.isfinite(reg).all(axis=2) if reg.ndim == 3 else np.isfinite(reg)
+        reg = result.registered[cam]
+        if isinstance(reg, HitImage):  # NaN off the hits by construction
+            n_mapped = int(np.isfinite(reg.values).all(axis=1).sum())
+        else:
+            reg = np.asarray(reg)
+            n_mapped = int((np.isfinite(reg).all(axis=2) if reg.ndim == 3 else np.isfinite(reg)).sum())
         c = _rig_camera(rig, cam)
         cameras[cam] = {
             "modality": c.modality if c is not None else None,
             "size": [c.width, c.height] if c is not None else None,
             "bands": _bands(reg),
-            "mapped_pixels": int(mapped.sum()),
+            "mapped_pixels": n_mapped,
             "role": "target" if cam == result.target else "source",
         }
     n_points = int(np.isfinite(np.asarray(result.points_rig)).all(axis=2).sum())
@@ -300,8 +410,10 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
         "areas": areas,
         "points": n_points,
         "timings": dict(result.timings),
+        "warnings": list(getattr(result, "warnings", [])),
         "export_timings": dict(export_timings or {}),
         "stats": dict(result.stats),
+        "tof": tof_summary(result),
         "case_codes": {str(k): v for k, v in CASE_NAMES.items()},
         "area_codes": {str(k): v for k, v in AREA_NAMES.items()},
         "files": list(files or []),
@@ -366,8 +478,20 @@ def _ply_name(name: str) -> str:
 
 
 def _bands(a: np.ndarray) -> int:
-    a = np.asarray(a)
-    return int(a.shape[2]) if a.ndim == 3 else 1
+    shape = a.shape if hasattr(a, "shape") else np.shape(a)  # a HitImage is not expanded for this
+    return int(shape[2]) if len(shape) == 3 else 1
+
+
+def _values_at(reg: Any, flat: np.ndarray, n: int) -> np.ndarray:
+    """(len(flat), C) float32 values of a registered image at row-major pixel indices ``flat``."""
+    if isinstance(reg, HitImage):
+        out = np.full((len(flat), reg.bands), np.nan, dtype=np.float32)
+        if len(reg.index):
+            pos = np.minimum(np.searchsorted(reg.index, flat), len(reg.index) - 1)
+            ok = reg.index[pos] == flat
+            out[ok] = reg.values[pos[ok]]
+        return out
+    return np.asarray(reg, dtype=np.float32).reshape(n, -1)[flat]
 
 
 def _rig_camera(rig: Rig, name: str):
@@ -403,8 +527,9 @@ def _colour_camera(result: RegistrationResult, rig: Rig) -> str | None:
 
 def _step_label(kind: str, cam: str) -> str:
     return {"registered": f"registered/{cam}.tif", "previews": f"registered/{cam}.png",
-            "cases": f"cases/{cam}.png"}.get(kind, {"areas": "areas.png", "pointcloud": "pointcloud.ply",
-                                                     "mosaic": "mosaic.png"}.get(kind, kind))
+            "cases": f"cases/{cam}.png", "edges": f"cases/{cam}_edge.png"}.get(
+        kind, {"areas": "areas.png", "pointcloud": "pointcloud.ply", "flying": "flying.png",
+               "mosaic": "mosaic.png"}.get(kind, kind))
 
 
 __all__ = ["OUTPUTS", "write_outputs", "write_ply", "build_summary", "ply_property_names"]

@@ -60,6 +60,10 @@ class MainWindow(QMainWindow):
     def is_busy(self) -> bool:
         return self.workspace.is_busy() or self.wizard.is_busy()
 
+    def busy_for_screenshot(self) -> bool:
+        """Busy with work the shown view needs (the wizard's page 1 does not wait for detection)."""
+        return self.workspace.is_busy() or self.wizard.page_busy()
+
     # ------------------------------------------------------------------ screenshots
     def screenshot_when_idle(self, path: Path, timeout: float) -> None:
         """Poll until no view is busy (and stays idle briefly), then grab the window and quit."""
@@ -71,7 +75,7 @@ class MainWindow(QMainWindow):
 
         def tick() -> None:
             now = time.monotonic()
-            if self.is_busy() and now - t0 < timeout:
+            if self.busy_for_screenshot() and now - t0 < timeout:
                 state["idle_since"] = None
                 return
             if state["idle_since"] is None:

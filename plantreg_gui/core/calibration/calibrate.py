@@ -40,6 +40,10 @@ from .detect import FOUND, MISSING, Detection, check_image_sizes, suggest_board_
 from .session import Session
 
 MIN_VIEWS = 3
+#: A calibration whose joint RMS reprojection error, or one camera's, exceeds this many pixels
+#: has failed (a wrong board size gives ~9 px; good rigs 0.05-0.5 px): ``plantreg calibrate``
+#: writes nothing and exits non-zero unless ``--max-rms`` allows more (docs/errors.md).
+MAX_RMS_PX = 2.0
 WEAK_FACTOR, WEAK_MIN_EXCESS_PX, WEAK_POSE_DEG = 2.0, 0.1, 1.0
 INCONSISTENT_DEG = 5.0
 
@@ -89,6 +93,10 @@ class Calibration:
     reference: str
     view_pose_deg: dict[tuple[str, str], float] = field(default_factory=dict)
     view_board_cam: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: (pose, camera) -> mean corner distance (px) of a view *excluded* by the user, measured with
+    #: the final intrinsics and the view's own board pose (as ``per_view_px``), so that an
+    #: exclusion can be judged; views whose board was not found are absent.
+    excluded_px: dict[tuple[str, str], float] = field(default_factory=dict)
 
     @property
     def weak_views(self) -> list[tuple[str, str, float, str]]:
@@ -326,6 +334,25 @@ def _too_few_message(session: Session, cam: str, views: dict[str, Detection],
     return msg
 
 
+def quality_problems(cal: "Calibration", max_rms_px: float = MAX_RMS_PX) -> list[str]:
+    """Why ``cal`` has clearly failed (empty list: it has not): RMS errors above ``max_rms_px``
+    (joint and per camera), or a calibrated camera outside the rig sanity bounds
+    (:mod:`plantreg_gui.core.validate`). Each item is one sentence with the numbers."""
+    out = []
+    if not np.isfinite(cal.joint_rms_px) or cal.joint_rms_px > max_rms_px:
+        out.append(f"joint RMS reprojection error {cal.joint_rms_px:.2f} px exceeds {max_rms_px:g} px")
+    for name, c in cal.intrinsics.items():
+        if not np.isfinite(c.rms_px) or c.rms_px > max_rms_px:
+            out.append(f"camera '{name}': RMS error {c.rms_px:.2f} px exceeds {max_rms_px:g} px "
+                       f"(fx {c.K[0, 0]:.1f}, fy {c.K[1, 1]:.1f} px)")
+    for i, c in enumerate(cal.rig.cameras):
+        try:
+            Camera.from_dict(c.to_dict(), f"camera '{c.name}'")
+        except ValueError as e:
+            out.append(f"the calibrated {e}")
+    return out
+
+
 def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
               excluded: set[tuple[str, str]] | frozenset = frozenset(),
               progress: Reporter | None = None) -> Calibration:
@@ -438,4 +465,23 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
     rig = Rig(cameras, session.depth_camera, session.depth_scale)
     progress(1.0, "calibration done")
     used = sorted((p, c) for c in cams for p in views[c] if (p, c) not in outliers)
-    return Calibration(rig, board, intrinsics, board_res, used, joint_rms, ref, view_pose_deg, view_board_cam)
+    return Calibration(rig, board, intrinsics, board_res, used, joint_rms, ref, view_pose_deg, view_board_cam,
+                       excluded_view_errors(intrinsics, session, detections, excluded))
+
+
+def excluded_view_errors(intrinsics: dict[str, "CameraCalibration"], session: Session,
+                         detections: dict[tuple[str, str], Detection], excluded) -> dict[tuple[str, str], float]:
+    """Mean corner distance (px) of each excluded view whose board was found, with the camera's
+    calibrated model and the view's own board pose (PnP)."""
+    out: dict[tuple[str, str], float] = {}
+    board = session.board
+    for key in sorted(excluded):
+        d, cc = detections.get(key), intrinsics.get(key[1])
+        if d is None or cc is None or d.status != FOUND or d.corners is None or len(d.corners) < 4:
+            continue
+        try:
+            per_view = _per_view_errors(cc.K, cc.dist, {key[0]: d}, board)[0]
+        except cv2.error:
+            continue
+        out[key] = per_view[key[0]]
+    return out

@@ -294,9 +294,10 @@ def suggest_board_size(images: list[np.ndarray], board: Board) -> tuple[int, int
 
 
 # ---------------------------------------------------------------------- sessions
-def detect_view(session, pose, camera: str, options: DetectOptions | None = None) -> Detection:
+def detect_view(session, pose, camera: str, options: DetectOptions | None = None,
+                image: np.ndarray | None = None) -> Detection:
     """Detect one (pose, camera) of a session (a missing image gives status ``missing``).
-    Unreadable files raise :class:`InputError`."""
+    ``image``: the view's image if already read. Unreadable files raise :class:`InputError`."""
     path = pose.images.get(camera)
     if path is None:
         return Detection(pose.name, camera, MISSING, f"no image of camera '{camera}' in this pose",
@@ -304,7 +305,7 @@ def detect_view(session, pose, camera: str, options: DetectOptions | None = None
     opts = options or DetectOptions()
     if opts.invert is None:
         opts = DetectOptions(session.default_inverted(camera), opts.enhance, opts.detector)
-    img = read_image(path)
+    img = read_image(path) if image is None else image
     det = detect_image(img, session.board, opts, session.cameras.get(camera))
     det.pose, det.camera, det.path = pose.name, camera, Path(path)
     det.options = options or DetectOptions()

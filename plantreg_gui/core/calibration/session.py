@@ -36,6 +36,24 @@ DEPTH_STEM = "depth"
 INVERTED_MODALITIES = tuple(m.name for m in modality.MODALITIES if m.inverted_board)
 
 
+
+CAMERA_META_KEYS = ("units", "bands")
+
+
+def camera_meta_from_dict(c: dict[str, Any], what: str, path) -> dict[str, Any]:
+    """The ``units`` (str) and ``bands`` (list of nm) of a camera entry, checked."""
+    meta: dict[str, Any] = {}
+    if c.get("units") is not None:
+        if not isinstance(c["units"], str):
+            raise InputError(f"{what}: \"units\" must be a string (e.g. \"degC\")", path)
+        meta["units"] = c["units"]
+    if c.get("bands") is not None:
+        b = c["bands"]
+        if not isinstance(b, list) or not b or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in b):
+            raise InputError(f"{what}: \"bands\" must be a list of band centres in nm", path)
+        meta["bands"] = [float(x) for x in b]
+    return meta
+
 @dataclass
 class Pose:
     """One board pose: ``images`` camera name -> file, ``depth`` the depth map file or None."""
@@ -63,8 +81,10 @@ def parse_view_key(key: str) -> tuple[str, str]:
 
 
 def _find_image(folder: Path, stem: str) -> Path | None:
+    # not only regular files: a FIFO or device named ir.png is reported by the reader as such,
+    # not silently treated as a missing image
     hits = sorted(p for p in folder.iterdir()
-                  if p.is_file() and p.stem == stem and p.suffix.lower() in IMAGE_SUFFIXES)
+                  if not p.is_dir() and p.stem == stem and p.suffix.lower() in IMAGE_SUFFIXES)
     return hits[0] if hits else None
 
 
@@ -85,6 +105,9 @@ class Session:
     poses: list[Pose] = field(default_factory=list)
     review: dict[str, Any] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
+    #: per camera, what the rig file carries beside the geometry: ``units`` (str, e.g. "degC") and
+    #: ``bands`` (band centres in nm, for multi-band cameras); copied into the calibrated rig
+    camera_meta: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ queries
     @property
@@ -153,7 +176,9 @@ class Session:
             raise InputError("session folder not found", folder)
         if not path.is_file():
             raise InputError(f"not a calibration session (no {SESSION_FILE})", folder)
-        d = read_json(path)
+        from ..validate import camera_name, show, unique_names
+
+        d = read_json(path, SESSION_FILE)
         if not isinstance(d, dict):
             raise InputError("the top level must be a JSON object", path)
         try:
@@ -164,25 +189,38 @@ class Session:
         if not isinstance(cams, dict) or not cams:
             raise InputError("\"cameras\" must be a non-empty object {NAME: {\"modality\": ...}}", path)
         cameras: dict[str, str] = {}
+        try:
+            for name in cams:
+                camera_name(name, "cameras key")
+            unique_names(list(cams))
+        except ValueError as e:
+            raise InputError(str(e), path) from None
+        camera_meta: dict[str, dict[str, Any]] = {}
         for name, c in cams.items():
             if not isinstance(c, dict):
                 raise InputError(f"camera '{name}' must be an object {{\"modality\": ...}}", path)
             if ":" in str(name) or str(name) == DEPTH_STEM:
                 raise InputError(f"camera name '{name}' is not allowed (no ':' and not '{DEPTH_STEM}')", path)
             cameras[str(name)] = modality.canonical(str(c.get("modality", "unknown")))
+            meta = camera_meta_from_dict(c, f"camera '{name}'", path)
+            if meta:
+                camera_meta[str(name)] = meta
         depth_camera, depth_scale = None, 0.001
         if d.get("depth") is not None:
             dd = d["depth"]
             if not isinstance(dd, dict) or "camera" not in dd:
                 raise InputError("\"depth\" must be {\"camera\": NAME, \"scale\": METRES_PER_UNIT}", path)
-            depth_camera = str(dd["camera"])
+            if not isinstance(dd["camera"], str):
+                raise InputError(f"depth.camera must be a camera name (a string), got {show(dd['camera'])}", path)
+            depth_camera = dd["camera"]
             if depth_camera not in cameras:
                 raise InputError(f"depth camera '{depth_camera}' is not among the cameras ({', '.join(cameras)})", path)
-            try:
-                depth_scale = float(dd.get("scale", 0.001))
-            except (TypeError, ValueError):
-                raise InputError("depth.scale must be a number (metres per depth unit)", path) from None
-            if not depth_scale > 0:
+            depth_scale = dd.get("scale", 0.001)
+            if isinstance(depth_scale, bool) or not isinstance(depth_scale, (int, float)):
+                raise InputError(f"depth.scale must be a number (metres per depth unit), got {show(depth_scale)}",
+                                 path)
+            depth_scale = float(depth_scale)
+            if not 0 < depth_scale < float("inf"):
                 raise InputError("depth.scale must be positive (metres per depth unit)", path)
         review = d.get("review") or {}
         if not isinstance(review, dict):
@@ -192,7 +230,7 @@ class Session:
         if not isinstance(review.get("options", {}), dict):
             raise InputError("review.options must be an object {\"POSE:CAMERA\": {...}}", path)
         extra = {k: v for k, v in d.items() if k not in ("board", "depth", "cameras", "review")}
-        s = cls(folder, board, cameras, depth_camera, depth_scale, [], review, extra)
+        s = cls(folder, board, cameras, depth_camera, depth_scale, [], review, extra, camera_meta)
         s.rescan()
         return s
 
@@ -232,7 +270,7 @@ class Session:
         d: dict[str, Any] = {"board": self.board.to_dict()}
         if self.depth_camera is not None:
             d["depth"] = {"camera": self.depth_camera, "scale": self.depth_scale}
-        d["cameras"] = {n: {"modality": m} for n, m in self.cameras.items()}
+        d["cameras"] = {n: {"modality": m, **self.camera_meta.get(n, {})} for n, m in self.cameras.items()}
         d["review"] = self.review
         for k, v in self.extra.items():
             d.setdefault(k, v)

@@ -401,7 +401,8 @@ def write_calibration_session(rig: Rig, folder: str | Path, seed: int = 0, n_pos
         session: dict[str, Any] = {"board": board.to_dict()}
         if rig.depth_camera:
             session["depth"] = {"camera": rig.depth_camera, "scale": rig.depth_scale}
-        session["cameras"] = {c.name: {"modality": c.modality} for c in rig.cameras}
+        session["cameras"] = {c.name: {"modality": c.modality, **{k: c.extra[k] for k in ("units", "bands")
+                                                                   if k in c.extra}} for c in rig.cameras}
         session["review"] = {}
         atomic_write_text(tmp / SESSION_FILE, json.dumps(session, indent=2) + "\n")
         atomic_write_text(tmp / TRUTH_FILE, json.dumps(truth, indent=2) + "\n")

@@ -7,9 +7,9 @@ from pathlib import Path
 from PySide6.QtCore import QSize, Qt
 from PySide6.QtGui import QColor, QIcon
 from PySide6.QtWidgets import (QAbstractItemView, QFileDialog, QHBoxLayout, QHeaderView, QLabel,
-                               QMessageBox, QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout,
-                               QWidget)
+                               QMessageBox, QPushButton, QTableWidget, QTableWidgetItem, QVBoxLayout)
 
+from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
 STATUS_COLOURS = {"found": "#d4edda", "failed": "#f8d7da", "missing": "#e2e3e5", None: "#ffffff"}
@@ -58,13 +58,11 @@ class CaptureTable(QTableWidget):
             event.ignore()
 
 
-class CapturePage(QWidget):
+class CapturePage(WizardPage):
     title = "Capture list"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
         lay = QVBoxLayout(self)
         self.summary = QLabel()
         self.summary.setWordWrap(True)
@@ -82,7 +80,7 @@ class CapturePage(QWidget):
         self.detect_btn = QPushButton("Detect corners")
         self.add_btn.clicked.connect(self._add)
         self.remove_btn.clicked.connect(self._remove)
-        self.detect_btn.clicked.connect(lambda: self.wizard.run_detection(None))
+        self.detect_btn.clicked.connect(lambda: self.actions.run_detection(None))
         hint = QLabel("Drop pose folders here. Double-click an image to review its corners.")
         hint.setStyleSheet("color: #666666;")
         hb.addWidget(hint, 1)
@@ -91,9 +89,10 @@ class CapturePage(QWidget):
         hb.addWidget(self.detect_btn)
         lay.addLayout(hb)
         self.model.session_changed.connect(self.rebuild)
+        self.model.poses_changed.connect(self.rebuild)
         self.model.detection_changed.connect(self.update_cell)
         self.model.review_changed.connect(self._update_all)
-        wizard.busy_changed.connect(self._busy)
+        actions.busy_changed.connect(self._busy)
 
     def _busy(self, busy: bool) -> None:
         for b in (self.add_btn, self.remove_btn, self.detect_btn):
@@ -117,7 +116,7 @@ class CapturePage(QWidget):
             for j, c in enumerate(cams):
                 self._set_cell(i, j, (p.name, c))
         self._summary()
-        self._busy(self.wizard.is_busy())
+        self._busy(self.actions.is_busy())
 
     def _update_all(self) -> None:
         s = self.model.session
@@ -149,12 +148,14 @@ class CapturePage(QWidget):
         if status is None and key[1] not in pose.images:
             status = "missing"
         text = STATUS_TEXT.get(status, str(status))
+        if excluded and status == "found":
+            text = "⊘ rejected"  # found but excluded: no green tick
         if status == "found" and det.corners is not None:
             text += f" ({len(det.corners)})"
         elif status == "failed" and det.reason:
             r = det.reason.split(" (")[0]
             text += "\n" + (r if len(r) <= 44 else r[:42] + "…")
-        if excluded:
+        if excluded and status != "found":
             text += "\nexcluded"
         it = QTableWidgetItem(text)
         tip = [f"{key[0]} / {key[1]}"]
@@ -212,7 +213,7 @@ class CapturePage(QWidget):
         it = self.table.item(row, col)
         key = it.data(Qt.ItemDataRole.UserRole) if it else None
         if key:
-            self.wizard.show_view(key[1], key[0])
+            self.actions.show_view(key[1], key[0])
 
     def _add(self) -> None:
         d = QFileDialog.getExistingDirectory(self, "Add a pose (folder with one image per camera)")
@@ -220,27 +221,19 @@ class CapturePage(QWidget):
             self.add_folders([Path(d)])
 
     def add_folders(self, dirs: list[Path]) -> list[str]:
-        from ...core.errors import PlantregError
-
         s = self.model.session
         if s is None:
             set_banner(self.message, "⚠ open or create a session first (page 1)", error=True)
             return []
-        if self.wizard.is_busy():
+        if self.actions.is_busy():
             set_banner(self.message, "⚠ wait until the running job finishes (or cancel it)", error=True)
             return []
-        added, problems = [], []
-        for d in dirs:
-            try:
-                added.append(s.add_pose_from_folder(d).name)
-            except (PlantregError, OSError) as e:
-                problems.append(str(e))
-        self.rebuild()
+        added, problems = self.model.add_pose_folders(dirs)
         if problems:
             set_banner(self.message, "⚠ " + "; ".join(problems), error=True)
         if added:
             keys = {(p, c) for p in added for c in s.pose(p).images}
-            self.wizard.run_detection(keys)
+            self.actions.run_detection(keys)
         return added
 
     def selected_poses(self) -> list[str]:
@@ -259,16 +252,6 @@ class CapturePage(QWidget):
             self.remove_poses(poses)
 
     def remove_poses(self, poses: list[str]) -> None:
-        from ...core.errors import PlantregError
-
-        s = self.model.session
-        try:
-            for p in poses:
-                s.remove_pose(p)
-        except (PlantregError, OSError) as e:
-            set_banner(self.message, f"⚠ {e}", error=True)
-        for k in [k for k in self.model.detections if k[0] in poses]:
-            self.model.detections.pop(k, None)
-            self.model.thumbnails.pop(k, None)
-        self.model.invalidate_calibration()
-        self.rebuild()
+        problems = self.model.remove_poses(poses)
+        if problems:
+            set_banner(self.message, "⚠ " + "; ".join(problems), error=True)

@@ -1,7 +1,13 @@
-"""Matplotlib charts of the wizard: per-view reprojection error bars, ToF bias per pose.
+"""Bar charts of the wizard: per-view reprojection error bars, ToF bias per pose.
 
 Like MATLAB's Camera Calibrator: one bar per view, the mean as a dashed line, weak views in
-orange; clicking a bar emits ``bar_clicked(camera, pose)`` so the wizard can open that view.
+orange; views excluded from the calibration stay on the chart, hatched grey and marked ✖ (their
+error measured with the final intrinsics), so a rejection leaves a trace. Clicking a bar emits
+``bar_clicked(camera, pose)`` so the wizard can open that view.
+
+Drawn with QPainter: these charts are redrawn whenever a calibration arrives, and Matplotlib
+took 0.5-1 s of GUI-thread time for four panels of twenty bars (constrained layout, text
+measuring); painting them takes a few milliseconds.
 """
 
 from __future__ import annotations
@@ -9,152 +15,268 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
-from matplotlib.figure import Figure
-from PySide6.QtCore import QPointF, Signal
-from PySide6.QtWidgets import QSizePolicy
+from PySide6.QtCore import QPointF, QRectF, Qt, Signal
+from PySide6.QtGui import QBrush, QColor, QFont, QPainter, QPen
+from PySide6.QtWidgets import QSizePolicy, QWidget
 
 NORMAL = "#4c72b0"
 WEAK = "#e8702a"
 SELECTED = "#c0392b"
+EXCLUDED = "#9a9a9a"
 
 
-class _Canvas(FigureCanvasQTAgg):
-    def __init__(self, parent=None, height: float = 3.0) -> None:
-        self.figure = Figure(figsize=(6, height), dpi=90, layout="constrained")
-        super().__init__(self.figure)
-        self.setParent(parent)
+def nice_ticks(hi: float, lo: float = 0.0, n: int = 5) -> np.ndarray:
+    """About ``n`` round tick values covering [lo, hi] (1, 2, 5 x 10^k steps)."""
+    span = max(hi - lo, 1e-12)
+    raw = span / max(n, 1)
+    mag = 10 ** math.floor(math.log10(raw))
+    step = next(m * mag for m in (1, 2, 5, 10) if m * mag >= raw)
+    return np.arange(math.floor(lo / step) * step, hi + step * 0.5, step)
+
+
+def _fmt_tick(v: float) -> str:
+    return f"{v:.3g}" if abs(v) >= 1e-9 else "0"
+
+
+class _Panel:
+    """One axes: a rectangle in widget coordinates, bars at x = 0..n-1, a y range."""
+
+    def __init__(self, rect: QRectF, n: int, ylo: float, yhi: float) -> None:
+        self.rect, self.n, self.ylo, self.yhi = rect, max(n, 1), ylo, yhi
+
+    def x(self, i: float) -> float:
+        return self.rect.left() + (i + 0.5) * self.rect.width() / self.n
+
+    def y(self, v: float) -> float:
+        return self.rect.bottom() - (v - self.ylo) / max(self.yhi - self.ylo, 1e-12) * self.rect.height()
+
+    @property
+    def bar_w(self) -> float:
+        return 0.8 * self.rect.width() / self.n
+
+
+def _draw_axes(p: QPainter, panel: _Panel, title: str, ylabel: str, xlabels: list[str], small: QFont) -> None:
+    r = panel.rect
+    p.setPen(QPen(QColor("#333333"), 1))
+    p.setFont(small)
+    fm = p.fontMetrics()
+    for v in nice_ticks(panel.yhi, panel.ylo):
+        if v < panel.ylo - 1e-12 or v > panel.yhi + 1e-12:
+            continue
+        y = panel.y(v)
+        p.setPen(QPen(QColor("#e6e6e6"), 1))
+        p.drawLine(QPointF(r.left(), y), QPointF(r.right(), y))
+        p.setPen(QPen(QColor("#333333"), 1))
+        p.drawLine(QPointF(r.left() - 3, y), QPointF(r.left(), y))
+        s = _fmt_tick(v)
+        p.drawText(QPointF(r.left() - 5 - fm.horizontalAdvance(s), y + fm.ascent() / 2 - 1), s)
+    p.setBrush(Qt.BrushStyle.NoBrush)  # the frame only: the brush is left from the previous panel's bars
+    p.drawRect(r)
+    step = max(1, math.ceil(len(xlabels) * (fm.horizontalAdvance("00") + 4) / max(r.width(), 1)))
+    for i, s in enumerate(xlabels):
+        if i % step == 0:
+            p.drawText(QPointF(panel.x(i) - fm.horizontalAdvance(s) / 2, r.bottom() + fm.ascent() + 2), s)
+    p.save()
+    p.translate(r.left() - 36, r.center().y())
+    p.rotate(-90)
+    p.drawText(QPointF(-fm.horizontalAdvance(ylabel) / 2, 0), ylabel)
+    p.restore()
+    tf = QFont(small)
+    tf.setBold(True)
+    p.setFont(tf)
+    p.drawText(QRectF(r.left(), r.top() - fm.height() - 4, r.width(), fm.height() + 2),
+               Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextSingleLine, title)
+    p.setFont(small)
+
+
+class _Chart(QWidget):
+    def __init__(self, parent=None, min_height: int = 160) -> None:
+        super().__init__(parent)
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
-        self.setMinimumHeight(160)
+        self.setMinimumHeight(min_height)
+        self.setAutoFillBackground(True)
+        pal = self.palette()
+        pal.setColor(self.backgroundRole(), QColor("white"))
+        self.setPalette(pal)
+
+    def _small(self) -> QFont:
+        f = QFont(self.font())
+        f.setPointSizeF(max(7.0, self.font().pointSizeF() * 0.85))
+        return f
+
+    def _message(self, p: QPainter, text: str) -> None:
+        p.setPen(QColor("#666666"))
+        p.drawText(self.rect(), Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextWordWrap, text)
 
 
-class PerViewChart(_Canvas):
-    """Per-view mean reprojection error (px), one subplot per camera."""
+class PerViewChart(_Chart):
+    """Per-view mean reprojection error (px), one panel per camera; excluded views hatched."""
 
     bar_clicked = Signal(str, str)  # camera, pose
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
-        self.bars: dict[str, dict[str, float]] = {}
-        self._rects: dict[tuple[str, str], object] = {}
-        self._axes: dict[str, object] = {}
-        self.mpl_connect("pick_event", self._on_pick)
-        self.set_data({}, {}, {})
+        self.bars: dict[str, dict[str, float]] = {}  # used views: cam -> pose -> px
+        self.excluded_bars: dict[str, dict[str, float]] = {}  # excluded views (nan: not measurable)
+        self._weak: dict[str, set[str]] = {}
+        self._mean: dict[str, float] = {}
+        self._selected: tuple[str, str] | None = None
+        self._rects: dict[tuple[str, str], QRectF] = {}
 
     def set_data(self, per_view: dict[str, dict[str, float]], weak: dict[str, set[str]],
-                 mean: dict[str, float], selected: tuple[str, str] | None = None) -> None:
-        """``per_view[cam][pose]`` px; ``weak[cam]`` poses flagged weak; ``mean[cam]`` px."""
-        fig = self.figure
-        fig.clear()
+                 mean: dict[str, float], selected: tuple[str, str] | None = None,
+                 excluded: dict[str, dict[str, float]] | None = None) -> None:
+        """``per_view[cam][pose]`` px; ``weak[cam]`` poses flagged weak; ``mean[cam]`` px;
+        ``excluded[cam][pose]`` px (or nan) of views left out of the calibration."""
         self.bars = {c: dict(v) for c, v in per_view.items()}
+        self.excluded_bars = {c: dict(v) for c, v in (excluded or {}).items() if v}
+        self._weak = {c: set(v) for c, v in weak.items()}
+        self._mean = dict(mean)
+        self._selected = selected
+        self._layout()
+        self.update()
+
+    def _cams(self) -> list[str]:
+        return [c for c in list(self.bars) + [c for c in self.excluded_bars if c not in self.bars]
+                if self.bars.get(c) or self.excluded_bars.get(c)]
+
+    def _layout(self) -> list[tuple[str, _Panel, list[str]]]:
         self._rects.clear()
-        self._axes.clear()
-        cams = [c for c in per_view if per_view[c]]
+        cams = self._cams()
+        out = []
         if not cams:
-            ax = fig.add_subplot(111)
-            ax.text(0.5, 0.5, "No calibration yet", ha="center", va="center", transform=ax.transAxes,
-                    color="#666666")
-            ax.set_axis_off()
-            self.draw_idle()
-            return
+            return out
         ncol = 1 if len(cams) <= 2 else 2
         nrow = math.ceil(len(cams) / ncol)
+        W, H = self.width(), self.height()
+        cw, ch = W / ncol, H / nrow
         for k, cam in enumerate(cams):
-            ax = fig.add_subplot(nrow, ncol, k + 1)
-            self._axes[cam] = ax
-            poses = sorted(per_view[cam])
-            vals = [float(per_view[cam][p]) for p in poses]
-            colours = []
-            for p in poses:
-                if selected == (cam, p):
-                    colours.append(SELECTED)
-                elif p in weak.get(cam, set()):
-                    colours.append(WEAK)
-                else:
-                    colours.append(NORMAL)
-            rects = ax.bar(range(len(poses)), vals, color=colours, edgecolor="black", linewidth=0.4, picker=True)
-            for p, r in zip(poses, rects):
-                r.set_gid(f"{cam}\x1f{p}")
-                self._rects[(cam, p)] = r
-            m = mean.get(cam)
+            i, j = divmod(k, ncol)
+            used, ex = self.bars.get(cam, {}), self.excluded_bars.get(cam, {})
+            poses = sorted(set(used) | set(ex))
+            vals = [v for v in list(used.values()) + list(ex.values()) if math.isfinite(v)]
+            top = max(vals + [self._mean.get(cam) or 0.0, 1e-3]) * 1.18
+            rect = QRectF(j * cw + 52, i * ch + 22, cw - 64, ch - 44)
+            panel = _Panel(rect, len(poses), 0.0, top)
+            for n, pose in enumerate(poses):
+                v = used.get(pose, ex.get(pose, float("nan")))
+                h = v if math.isfinite(v) else top * 0.06  # an unmeasurable excluded view: a stub
+                x0 = panel.x(n) - panel.bar_w / 2
+                self._rects[(cam, pose)] = QRectF(x0, panel.y(h), panel.bar_w, panel.y(0) - panel.y(h))
+            out.append((cam, panel, poses))
+        return out
+
+    def paintEvent(self, event) -> None:  # noqa: N802
+        p = QPainter(self)
+        p.setRenderHint(QPainter.RenderHint.Antialiasing, False)
+        panels = self._layout()
+        if not panels:
+            self._message(p, "No calibration yet")
+            return
+        small = self._small()
+        for cam, panel, poses in panels:
+            used, ex = self.bars.get(cam, {}), self.excluded_bars.get(cam, {})
+            weak = self._weak.get(cam, set())
+            m = self._mean.get(cam)
             title = f"{cam}: per-view reprojection error"
             if m is not None and math.isfinite(m):
-                ax.axhline(m, color="#333333", linestyle="--", linewidth=1.0)
                 title += f" (dashed: mean {m:.3f} px)"
-            n_weak = sum(1 for p in poses if p in weak.get(cam, set()))
+            n_weak = sum(1 for q in poses if q in weak and q in used)
             if n_weak:
                 title += f", {n_weak} weak"
-            ax.set_title(title, fontsize=9)
-            ax.set_ylabel("px", fontsize=8)
-            ax.set_xticks(range(len(poses)))
-            short = [p.replace("pose_", "") for p in poses]
-            ax.set_xticklabels(short, rotation=90 if len(poses) > 12 else 0, fontsize=7)
-            ax.tick_params(axis="y", labelsize=7)
-            ax.set_ylim(0, max(vals + [m or 0]) * 1.18 if vals else 1)
-            ax.margins(x=0.01)
-        self.draw_idle()
+            if ex:
+                title += f", {len(ex)} excluded ✖"
+            labels = [q.replace("pose_", "") for q in poses]
+            _draw_axes(p, panel, title, "px", labels, small)
+            for pose in poses:
+                r = self._rects[(cam, pose)]
+                if pose in used:
+                    colour = SELECTED if self._selected == (cam, pose) else (WEAK if pose in weak else NORMAL)
+                    p.setBrush(QColor(colour))
+                    p.setPen(QPen(QColor("black"), 0.6))
+                    p.drawRect(r)
+                else:
+                    p.setBrush(QColor("#e4e4e4"))
+                    p.setPen(QPen(QColor(EXCLUDED), 1, Qt.PenStyle.DashLine))
+                    p.drawRect(r)
+                    p.setBrush(QBrush(QColor(EXCLUDED), Qt.BrushStyle.BDiagPattern))
+                    p.drawRect(r)
+                    p.setPen(QColor("#b02a37"))
+                    fm = p.fontMetrics()
+                    p.drawText(QPointF(r.center().x() - fm.horizontalAdvance("✖") / 2, r.top() - 2), "✖")
+            if m is not None and math.isfinite(m):
+                p.setPen(QPen(QColor("#333333"), 1, Qt.PenStyle.DashLine))
+                y = panel.y(m)
+                p.drawLine(QPointF(panel.rect.left(), y), QPointF(panel.rect.right(), y))
+        p.end()
+
+    def resizeEvent(self, event) -> None:  # noqa: N802
+        super().resizeEvent(event)
+        self._layout()
 
     def tallest(self, camera: str) -> str | None:
+        """The used view with the largest error (excluded views do not count)."""
         v = self.bars.get(camera) or {}
         return max(v, key=v.get) if v else None
 
     def bar_center(self, camera: str, pose: str) -> QPointF:
         """Widget coordinates of the middle of a bar (for tests and keyboard access)."""
-        self.draw()
-        r = self._rects[(camera, pose)]
-        x = r.get_x() + r.get_width() / 2
-        y = r.get_height() / 2
-        X, Y = r.axes.transData.transform((x, y))
-        dpr = self.devicePixelRatioF() or 1.0
-        return QPointF(X / dpr, self.height() - Y / dpr)
+        self._layout()
+        return self._rects[(camera, pose)].center()
 
-    def _on_pick(self, event) -> None:
-        gid = event.artist.get_gid() if event.artist is not None else None
-        if gid and "\x1f" in gid:
-            cam, pose = gid.split("\x1f", 1)
-            self.bar_clicked.emit(cam, pose)
+    def bar_at(self, pos: QPointF) -> tuple[str, str] | None:
+        for key, r in self._rects.items():
+            if r.adjusted(-1, -1, 1, 1).contains(pos):
+                return key
+        return None
+
+    def mousePressEvent(self, event) -> None:  # noqa: N802
+        key = self.bar_at(event.position())
+        if key is not None and event.button() == Qt.MouseButton.LeftButton:
+            self.bar_clicked.emit(key[0], key[1])
+        super().mousePressEvent(event)
 
 
-class BiasChart(_Canvas):
+class BiasChart(_Chart):
     """ToF depth bias per pose (mm) with the Azure Kinect specification band."""
 
     def __init__(self, parent=None) -> None:
-        super().__init__(parent, height=2.6)
-        self.set_data({}, {})
+        super().__init__(parent, min_height=150)
+        self.bias: dict[str, float] = {}
+        self._dist: dict[str, float] = {}
 
     def set_data(self, bias_mm: dict[str, float], distance_mm: dict[str, float]) -> None:
-        fig = self.figure
-        fig.clear()
-        ax = fig.add_subplot(111)
-        poses = sorted(p for p, v in bias_mm.items() if v is not None and np.isfinite(v))
+        self.bias = {p: float(v) for p, v in bias_mm.items() if v is not None and np.isfinite(v)}
+        self._dist = dict(distance_mm)
+        self.update()
+
+    def paintEvent(self, event) -> None:  # noqa: N802
+        p = QPainter(self)
+        poses = sorted(self.bias)
         if not poses:
-            ax.text(0.5, 0.5, "No depth bias (the rig has no depth camera or no depth maps)", ha="center",
-                    va="center", transform=ax.transAxes, color="#666666")
-            ax.set_axis_off()
-            self.draw_idle()
+            self._message(p, "No depth bias (the rig has no depth camera or no depth maps)")
             return
-        vals = np.array([bias_mm[p] for p in poses], float)
-        spec = np.array([11.0 + 0.001 * distance_mm.get(p, float("nan")) for p in poses])
-        x = np.arange(len(poses))
-        over = np.abs(vals) > np.nan_to_num(spec, nan=11.0)
-        ax.bar(x, vals, color=np.where(over, WEAK, NORMAL), edgecolor="black", linewidth=0.4)
-        if np.isfinite(spec).any():
-            ax.step(np.r_[x - 0.5, x[-1] + 0.5], np.r_[spec, spec[-1]], where="post", color="#c0392b",
-                    linestyle="--", linewidth=1.0, label="Azure Kinect spec ±(11 mm + 0.1 % of distance)")
-            ax.step(np.r_[x - 0.5, x[-1] + 0.5], -np.r_[spec, spec[-1]], where="post", color="#c0392b",
-                    linestyle="--", linewidth=1.0)
-        else:
-            ax.axhline(11, color="#c0392b", linestyle="--", linewidth=1.0, label="Azure Kinect spec ±11 mm")
-            ax.axhline(-11, color="#c0392b", linestyle="--", linewidth=1.0)
-        ax.axhline(0, color="black", linewidth=0.6)
-        ax.set_xticks(x)
-        ax.set_xticklabels([p.replace("pose_", "") for p in poses], fontsize=7,
-                           rotation=90 if len(poses) > 12 else 0)
-        ax.set_ylabel("bias (mm)", fontsize=8)
-        ax.set_title("ToF bias per pose: measured depth on the board minus the calibrated board plane",
-                     fontsize=9)
-        ax.tick_params(axis="y", labelsize=7)
-        lim = max(float(np.nanmax(np.abs(vals))), float(np.nanmax(spec)) if np.isfinite(spec).any() else 11.0)
-        ax.set_ylim(-1.25 * lim, 1.25 * lim)
-        ax.legend(fontsize=7, loc="upper right")
-        self.draw_idle()
+        vals = np.array([self.bias[q] for q in poses], float)
+        spec = np.array([11.0 + 0.001 * self._dist.get(q, float("nan")) for q in poses])
+        spec = np.where(np.isfinite(spec), spec, 11.0)
+        lim = 1.25 * max(float(np.max(np.abs(vals))), float(np.max(spec)))
+        panel = _Panel(QRectF(60, 24, self.width() - 72, self.height() - 62), len(poses), -lim, lim)
+        _draw_axes(p, panel, "ToF bias per pose: measured depth on the board minus the calibrated board plane",
+                   "bias (mm)", [q.replace("pose_", "") for q in poses], self._small())
+        p.setPen(QPen(QColor("black"), 0.8))
+        p.drawLine(QPointF(panel.rect.left(), panel.y(0)), QPointF(panel.rect.right(), panel.y(0)))
+        for i, v in enumerate(vals):
+            p.setBrush(QColor(WEAK if abs(v) > spec[i] else NORMAL))
+            p.setPen(QPen(QColor("black"), 0.6))
+            y0, y1 = panel.y(0), panel.y(v)
+            p.drawRect(QRectF(panel.x(i) - panel.bar_w / 2, min(y0, y1), panel.bar_w, abs(y1 - y0)))
+        p.setPen(QPen(QColor("#c0392b"), 1.2, Qt.PenStyle.DashLine))
+        for i, s in enumerate(spec):
+            xl, xr = panel.x(i) - panel.rect.width() / panel.n / 2, panel.x(i) + panel.rect.width() / panel.n / 2
+            for sign in (1, -1):
+                p.drawLine(QPointF(xl, panel.y(sign * s)), QPointF(xr, panel.y(sign * s)))
+        p.setPen(QColor("#c0392b"))
+        p.setFont(self._small())
+        p.drawText(QRectF(panel.rect.left(), panel.rect.top() + 2, panel.rect.width() - 6, 16),
+                   Qt.AlignmentFlag.AlignRight, "dashed: Azure Kinect spec ±(11 mm + 0.1 % of distance)")
+        p.end()

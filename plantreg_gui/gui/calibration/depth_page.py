@@ -6,17 +6,16 @@ from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QComboBox, QGroupBox, QHBoxLayout, QLabel, QSplitter, QVBoxLayout, QWidget
 
 from . import results
+from .page import WizardPage
 from .charts import BiasChart
 from .widgets import banner, fill_matrix, fmt, grade_colour, grade_legend, item, make_table, set_banner
 
 
-class DepthPage(QWidget):
+class DepthPage(WizardPage):
     title = "Depth"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
         lay = QVBoxLayout(self)
         self.message = banner()
         lay.addWidget(self.message)
@@ -36,7 +35,7 @@ class DepthPage(QWidget):
         g2l.addWidget(self.bias)
         ll.addWidget(g2, 1)
         split.addWidget(left)
-        g3 = QGroupBox("Per-view breakdown: depth error per pose (px), worst first")
+        g3 = QGroupBox("Per-view breakdown: depth error per pose (px and normalised), worst first")
         g3l = QVBoxLayout(g3)
         hb = QHBoxLayout()
         hb.addWidget(QLabel("Origin camera:"))
@@ -46,10 +45,15 @@ class DepthPage(QWidget):
         g3l.addLayout(hb)
         self.views = make_table(stretch=True)
         g3l.addWidget(self.views)
+        # the cells show both numbers the colour is about (defect 9: px shown, normalised coloured)
+        self.views_legend = grade_legend("Rows: poses, worst first; columns: target cameras. Cells: mean depth "
+                                         "error in pixels of the target and normalised (× 1000/√(h·w) of the "
+                                         "target), as in the table on the left.")
+        g3l.addWidget(self.views_legend)
         split.addWidget(g3)
         split.setSizes([760, 560])
         lay.addWidget(split, 1)
-        self.model.report_changed.connect(self.refresh)
+        self.model.report_changed.connect(self.refresh_later)
 
     def refresh(self) -> None:
         rep, cal, s = self.model.report, self.model.calibration, self.model.session
@@ -57,7 +61,7 @@ class DepthPage(QWidget):
             set_banner(self.message, "This rig has no depth camera: there is no depth error table "
                                      "and no ToF bias. Go on to Save.")
         elif rep is None:
-            set_banner(self.message, "Computing the error tables…" if self.wizard.is_busy()
+            set_banner(self.message, "Computing the error tables…" if self.actions.is_busy()
                        else "No error tables yet: they are computed when you come to this page.")
         else:
             set_banner(self.message, "Out of date: the calibration changed." if self.model.report_stale else "")
@@ -98,11 +102,12 @@ class DepthPage(QWidget):
         for i, (_worst, pose, cells) in enumerate(rows):
             self.views.setItem(i, 0, item(pose, bold=True))
             for j, c in enumerate(cells):
-                it = item(fmt(c.get("px") if c else None),
-                          bg=grade_colour(c.get("normalized", float("nan"))) if c else None)
+                if c and c.get("px") is not None:
+                    nn = c.get("normalized", float("nan"))
+                    it = item(f"{fmt(c['px'], 3)} px\n{fmt(nn, 3)} norm.", bg=grade_colour(nn),
+                              tooltip=f"{pose}: {o} → {pairs[j][1]}: {c['px']:.4f} px of {pairs[j][1]}, "
+                                      f"{nn:.4f} normalised (colour)")
+                else:
+                    it = item("—")
                 self.views.setItem(i, j + 1, it)
         self.views.resizeRowsToContents()
-
-    def showEvent(self, event) -> None:  # noqa: N802
-        super().showEvent(event)
-        self.refresh()

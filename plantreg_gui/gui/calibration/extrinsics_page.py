@@ -7,17 +7,16 @@ from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QGroupBox, QHeaderView, QLabel, QSplitter, QVBoxLayout, QWidget
 
 from . import results
+from .page import WizardPage
 from .frusta_view import FrustaView
 from .widgets import banner, fill_matrix, fmt, grade_legend, item, make_table, set_banner
 
 
-class ExtrinsicsPage(QWidget):
+class ExtrinsicsPage(WizardPage):
     title = "Extrinsics"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
         lay = QVBoxLayout(self)
         self.message = banner()
         lay.addWidget(self.message)
@@ -52,14 +51,14 @@ class ExtrinsicsPage(QWidget):
         split.setSizes([700, 620])
         lay.addWidget(split, 1)
         self._drawn = None
-        self.model.calibration_changed.connect(self.refresh)
-        self.model.report_changed.connect(self.refresh)
+        self.model.calibration_changed.connect(self.refresh_later)
+        self.model.report_changed.connect(self.refresh_later)
 
     def refresh(self) -> None:
         cal, rep = self.model.calibration, self.model.report
         if rep is None:
             self.table.setRowCount(0)
-            set_banner(self.message, "Computing the error tables…" if self.wizard.is_busy()
+            set_banner(self.message, "Computing the error tables…" if self.actions.is_busy()
                        else "No error tables yet: they are computed when you come to this page.")
         else:
             set_banner(self.message, "Out of date: the calibration changed. Going Next or coming back recomputes."
@@ -87,7 +86,3 @@ class ExtrinsicsPage(QWidget):
             if self._drawn is not cal:
                 self._drawn = cal
                 self.view3d.set_scene(list(rig.cameras), results.board_outlines(cal, self.model.session))
-
-    def showEvent(self, event) -> None:  # noqa: N802
-        super().showEvent(event)
-        self.refresh()

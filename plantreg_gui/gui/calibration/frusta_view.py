@@ -26,6 +26,28 @@ def frustum_lines(cam, depth: float) -> tuple[np.ndarray, np.ndarray]:
     return pts, lines
 
 
+_preload: list = []
+
+
+def preload() -> None:
+    """Import pyvista/pyvistaqt (VTK: seconds on a loaded machine) on a background thread, so
+    that showing the 3D view later does not import them on the GUI thread. Once per process."""
+    if _preload:
+        return
+    import threading
+
+    def run() -> None:
+        try:
+            import pyvista  # noqa: F401
+            import pyvistaqt  # noqa: F401
+        except Exception:  # reported when the view is created
+            pass
+
+    t = threading.Thread(target=run, name="preload-pyvista", daemon=True)
+    _preload.append(t)
+    t.start()
+
+
 class FrustaView(QWidget):
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
@@ -57,7 +79,10 @@ class FrustaView(QWidget):
         try:
             from pyvistaqt import QtInteractor
 
-            plotter = QtInteractor(self)
+            # no auto_update: pyvistaqt's default re-renders 5 times a second for ever, which with
+            # software OpenGL took most of the GUI thread; we render when the scene changes and
+            # the interactor renders while the user rotates or zooms
+            plotter = QtInteractor(self, auto_update=False)
             plotter.set_background("#20242a")
             self._stack.insertWidget(0, plotter.interactor)
             self.plotter = plotter
@@ -94,9 +119,11 @@ class FrustaView(QWidget):
         if depth is None:
             dists = [float(np.linalg.norm(b.mean(axis=0) - centres.mean(axis=0))) for b in boards]
             depth = 0.4 * float(np.median(dists)) if dists else 0.15
-        for i, b in enumerate(boards):
-            quad = pv.PolyData(np.asarray(b, float), faces=np.array([4, 0, 1, 2, 3]))
-            p.add_mesh(quad, color="#c8c8c8", opacity=0.35, show_edges=True, edge_color="#f0f0f0")
+        if boards:  # one actor for all boards: each actor costs the first (software GL) render time
+            pts = np.concatenate([np.asarray(b, float) for b in boards])
+            faces = np.concatenate([[4, 4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 3] for i in range(len(boards))])
+            p.add_mesh(pv.PolyData(pts, faces=faces), color="#c8c8c8", opacity=0.35, show_edges=True,
+                       edge_color="#f0f0f0")
         labels = []
         for i, cam in enumerate(cameras):
             pts, lines = frustum_lines(cam, depth)

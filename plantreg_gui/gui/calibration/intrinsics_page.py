@@ -3,20 +3,19 @@
 from __future__ import annotations
 
 from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QHBoxLayout, QHeaderView, QLabel, QPushButton, QSplitter, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QHBoxLayout, QHeaderView, QLabel, QPushButton, QSplitter, QVBoxLayout
 
 from . import results
+from .page import WizardPage
 from .charts import PerViewChart
 from .widgets import banner, fmt, grade_colour, item, make_table, set_banner
 
 
-class IntrinsicsPage(QWidget):
+class IntrinsicsPage(WizardPage):
     title = "Intrinsics"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
         lay = QVBoxLayout(self)
         self.message = banner()
         lay.addWidget(self.message)
@@ -33,7 +32,8 @@ class IntrinsicsPage(QWidget):
         self.worst.setWordWrap(True)
         lay.addWidget(self.worst)
         hint = QLabel("Each bar is one view's mean reprojection error; orange bars are the views the "
-                      "calibration flags as weak, the dashed line is the camera's mean. Click a bar to "
+                      "calibration flags as weak, hatched grey bars marked ✖ the views you excluded (their error "
+                      "with the final model), the dashed line is the camera's mean. Click a bar to "
                       "inspect that view (page 3) and reject it there.")
         hint.setWordWrap(True)
         hint.setStyleSheet("color: #444444;")
@@ -42,14 +42,15 @@ class IntrinsicsPage(QWidget):
         self.exclude_btn = QPushButton("Exclude weak views and recalibrate")
         self.exclude_btn.clicked.connect(self.exclude_weak)
         self.recal_btn = QPushButton("Recalibrate")
-        self.recal_btn.clicked.connect(lambda: self.wizard.recalibrate())
+        self.recal_btn.clicked.connect(lambda: self.actions.recalibrate())
         hb.addStretch(1)
         hb.addWidget(self.recal_btn)
         hb.addWidget(self.exclude_btn)
         lay.addLayout(hb)
-        self.model.calibration_changed.connect(self.refresh)
-        self.model.report_changed.connect(self.refresh)
-        wizard.busy_changed.connect(self._on_busy)
+        self.model.calibration_changed.connect(self.refresh_later)
+        self.model.report_changed.connect(self.refresh_later)
+        self.model.review_changed.connect(self.refresh_later)
+        actions.busy_changed.connect(self._on_busy)
 
     def _on_busy(self, busy) -> None:
         self._buttons()
@@ -57,15 +58,15 @@ class IntrinsicsPage(QWidget):
             self._banner()
 
     def _banner(self) -> None:
-        if self.wizard.is_busy():
+        if self.actions.is_busy():
             set_banner(self.message, "Calibrating… (the results appear here when done)")
-        elif self.wizard.last_error and self.model.session is not None:
-            set_banner(self.message, f"⚠ The calibration failed: {self.wizard.last_error}", error=True)
+        elif self.actions.last_error and self.model.session is not None:
+            set_banner(self.message, f"⚠ The calibration failed: {self.actions.last_error}", error=True)
         else:
             set_banner(self.message, "Not calibrated yet: the calibration runs when you come to this page.")
 
     def _buttons(self) -> None:
-        busy = self.wizard.is_busy()
+        busy = self.actions.is_busy()
         weak = results.weak_views(self.model.calibration) if self.model.calibration_ready() else set()
         weak -= self.model.excluded
         self.exclude_btn.setText(f"Exclude {len(weak)} weak view{'s' if len(weak) != 1 else ''} and recalibrate"
@@ -117,7 +118,9 @@ class IntrinsicsPage(QWidget):
         per_view = results.per_view_px(cal)
         weak = results.weak_by_camera(cal)
         mean = {r["camera"]: r["px"] for r in rows}
-        self.chart.set_data(per_view, weak, mean)
+        ex = results.excluded_px(cal, self.model.excluded, self.model.detections)
+        per_view = {c: {p: v for p, v in pv.items() if p not in ex.get(c, {})} for c, pv in per_view.items()}
+        self.chart.set_data(per_view, weak, mean, excluded=ex)
         # mrcal-style: the worst views first, across cameras (on the normalised error)
         norm = {n: float(c.normalization) for n, c in cal.intrinsics.items()}
         worst = sorted(((px * norm[c], c, p, px) for c, v in per_view.items() for p, px in v.items()), reverse=True)[:6]
@@ -125,15 +128,11 @@ class IntrinsicsPage(QWidget):
             f"{c} {p} {px:.3f} px ({nn:.3f} norm.)" for nn, c, p, px in worst))
 
     def _bar(self, camera: str, pose: str) -> None:
-        self.wizard.show_view(camera, pose)
+        self.actions.show_view(camera, pose)
 
     def exclude_weak(self) -> None:
         weak = results.weak_views(self.model.calibration) if self.model.calibration is not None else set()
         if not weak:
             return
         self.model.set_excluded_many(weak, True)
-        self.wizard.recalibrate()
-
-    def showEvent(self, event) -> None:  # noqa: N802
-        super().showEvent(event)
-        self.refresh()
+        self.actions.recalibrate()

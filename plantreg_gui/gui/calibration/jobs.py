@@ -9,10 +9,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ...core.calibration import Detection, calibrate, calibrated_rig, detect_session, error_tables, write_report
-from ...core.imageio import read_image
+from ...core.calibration import Detection, calibrate, calibrated_rig, error_tables
+from ...core.calibration.preview import detect_with_thumbnail
+from ...core.process_job import run_in_process
 from ...core.progress import Reporter, ensure_reporter
-from .widgets import thumbnail
 
 Key = tuple[str, str]
 
@@ -20,47 +20,40 @@ Key = tuple[str, str]
 def detect_job(session, options: dict | None, keys: set[Key] | None, sink: Callable[[Any, Any], None],
                progress: Reporter | None = None) -> int:
     """Detect corners in ``keys`` (all images if None), calling ``sink(detection, thumbnail)`` for
-    every result as it arrives. An unreadable image becomes a failed detection with the reader's
-    message instead of ending the run. Returns the number of detections."""
+    every result as it arrives. Each image is read, detected and thumbnailed in the worker
+    process (percentile stretches and corner ordering hold the GIL). An unreadable image becomes
+    a failed detection with the reader's message instead of ending the run. Returns the number
+    of detections."""
     from ...core.errors import InputError
 
     progress = ensure_reporter(progress)
+    opts = session.detect_options()
+    opts.update(options or {})
     todo = [(p.name, c) for p in session.poses for c in session.camera_names
             if keys is None or (p.name, c) in keys]
-    poses = {p.name: p for p in session.poses}
-    done: set[Key] = set()
     n_total = max(1, len(todo))
-    while len(done) < len(todo):
-        rest = [k for k in todo if k not in done]
-        sub = progress.sub(len(done) / n_total, 1.0)
+    for k, key in enumerate(todo):
+        progress(k / n_total, f"detecting {key[0]}/{key[1]}")
         try:
-            for det in detect_session(session, options or None, progress=sub, views=rest):
-                key = (det.pose, det.camera)
-                done.add(key)
-                sink(det, _thumb(poses[det.pose].images.get(det.camera)) if det.status != "missing" else None)
-        except InputError as e:  # the view being read is unreadable: say so, go on with the others
-            key = next(k for k in todo if k not in done)
-            done.add(key)
-            sink(Detection(key[0], key[1], "failed", f"unreadable image: {e}", None, None, (0, 0), False,
-                           poses[key[0]].images.get(key[1])), None)
-    return len(done)
-
-
-def _thumb(path) -> np.ndarray | None:
-    if path is None:
-        return None
-    try:
-        return thumbnail(read_image(path), 112)
-    except Exception:  # the detection already carries the reason a file is bad
-        return None
+            det, thumb = run_in_process(detect_with_thumbnail, session, key[0], key[1], opts.get(key),
+                                        progress=progress.sub(k / n_total, (k + 1) / n_total))
+        except InputError as e:  # this view is unreadable: say so, go on with the others
+            det, thumb = Detection(key[0], key[1], "failed", f"unreadable image: {e}", None, None, (0, 0), False,
+                                   session.pose(key[0]).images.get(key[1])), None
+        sink(det, thumb if det.status != "missing" else None)
+    progress(1.0, "detection done")
+    return len(todo)
 
 
 def calibrate_job(session, detections: dict, excluded: set[Key], progress: Reporter | None = None):
-    return calibrate(session, detections, excluded, progress=progress)
+    """The calibration, in the worker process: its bundle adjustment loops in Python and would
+    hold the GIL against the GUI thread for seconds (see :mod:`~plantreg_gui.core.process_job`)."""
+    return run_in_process(calibrate, session, detections, excluded, progress=progress)
 
 
 def tables_job(session, calibration, detections: dict, excluded: set[Key], progress: Reporter | None = None):
-    return error_tables(session, calibration, detections, excluded, progress=progress)
+    """The error tables, in the worker process (meshing every depth map holds the GIL)."""
+    return run_in_process(error_tables, session, calibration, detections, excluded, progress=progress)
 
 
 def demo_job(folder: Path, progress: Reporter | None = None) -> Path:
@@ -85,7 +78,7 @@ def demo_job(folder: Path, progress: Reporter | None = None) -> Path:
 def save_job(calibration, session, report, excluded: set[Key], rig_path: Path, report_path: Path | None,
              roi_min: np.ndarray, roi_max: np.ndarray, progress: Reporter | None = None) -> dict[str, str]:
     """Write the rig file (ROI and provenance inside) and the report JSON with its CSV tables
-    beside it, with the engine's writers (each file atomically)."""
+    beside it, with the engine's writers (all together, as one transaction)."""
     progress = ensure_reporter(progress)
     progress(0.1, "writing rig file")
     rig = calibrated_rig(calibration, session, report, roi=(np.asarray(roi_min, float), np.asarray(roi_max, float)),
@@ -93,12 +86,15 @@ def save_job(calibration, session, report, excluded: set[Key], rig_path: Path, r
     rig_path = Path(rig_path)
     rig_path.parent.mkdir(parents=True, exist_ok=True)
     out: dict[str, str] = {"rig": str(rig_path)}
+    from ...core.calibration.report import write_calibration
+
     if report is not None and report_path is not None:
-        progress(0.4, "writing report and CSV tables")
+        progress(0.4, "writing rig file, report and CSV tables")
         Path(report_path).parent.mkdir(parents=True, exist_ok=True)
-        paths = write_report(report, report_path)
+    # one transaction: all files appear together, or none and the previous set stays
+    paths = write_calibration(rig, rig_path, report, report_path)
+    if report is not None and report_path is not None:
         out["report"] = str(paths[0])
-        out["csv"] = ", ".join(p.name for p in paths[1:])
-    rig.save(rig_path)  # last: a rig file on disk means everything else was written
+        out["csv"] = ", ".join(p.name for p in paths[1:-1])
     progress(1.0, "saved")
     return out

@@ -21,6 +21,9 @@ class WizardModel(QObject):
     review_changed = Signal()
     calibration_changed = Signal()
     report_changed = Signal()
+    saved_changed = Signal()
+    poses_changed = Signal()  # pose folders added to or removed from the session
+    view_selected = Signal(object)  # Key: show this image in the corner review
 
     def __init__(self, parent: QObject | None = None) -> None:
         super().__init__(parent)
@@ -131,7 +134,56 @@ class WizardModel(QObject):
         except OSError:
             pass  # a read-only session still works; the choices just do not persist
 
+    def select_view(self, key: Key) -> None:
+        """Ask the corner review to show image ``key`` = (pose, camera)."""
+        self.view_selected.emit(tuple(key))
+
     # ------------------------------------------------------------------ results
+    def clear_detections(self) -> None:
+        """Forget every detection (before detecting all images again)."""
+        self.detections.clear()
+        self.thumbnails.clear()
+        self.invalidate_calibration()
+        self.detection_changed.emit(None)
+
+    def add_pose_folders(self, dirs) -> tuple[list[str], list[str]]:
+        """Copy pose folders into the session; returns (added pose names, problems)."""
+        from ...core.errors import PlantregError
+
+        added, problems = [], []
+        for d in dirs:
+            try:
+                added.append(self.session.add_pose_from_folder(d).name)
+            except (PlantregError, OSError) as e:
+                problems.append(str(e))
+        if added:
+            self.invalidate_calibration()
+            self.poses_changed.emit()
+        return added, problems
+
+    def remove_poses(self, poses) -> list[str]:
+        """Delete pose folders from the session and forget their detections; returns problems."""
+        from ...core.errors import PlantregError
+
+        problems = []
+        poses = set(poses)
+        for p in sorted(poses):
+            try:
+                self.session.remove_pose(p)
+            except (PlantregError, OSError) as e:
+                problems.append(str(e))
+        for k in [k for k in self.detections if k[0] in poses]:
+            self.detections.pop(k, None)
+            self.thumbnails.pop(k, None)
+        self.invalidate_calibration()
+        self.poses_changed.emit()
+        self.detection_changed.emit(None)
+        return problems
+
+    def set_saved_paths(self, paths: dict[str, str]) -> None:
+        self.saved_paths = dict(paths)
+        self.saved_changed.emit()
+
     def put_detection(self, det, thumb: np.ndarray | None) -> None:
         key = (det.pose, det.camera)
         self.detections[key] = det

@@ -38,6 +38,21 @@ def per_view_px(cal) -> dict[str, dict[str, float]]:
     return {name: {p: float(v) for p, v in c.per_view_px.items()} for name, c in cal.intrinsics.items()}
 
 
+def excluded_px(cal, excluded, detections) -> dict[str, dict[str, float]]:
+    """cam -> pose -> px of the excluded views whose board was found: the calibration's measure
+    of them (``excluded_px``, or ``per_view_px`` if they were excluded after it ran), else nan."""
+    out: dict[str, dict[str, float]] = {}
+    for pose, cam in excluded:
+        d = detections.get((pose, cam))
+        if d is None or getattr(d, "status", None) != "found":
+            continue
+        v = getattr(cal, "excluded_px", {}).get((pose, cam))
+        if v is None and cam in cal.intrinsics:
+            v = cal.intrinsics[cam].per_view_px.get(pose)
+        out.setdefault(cam, {})[pose] = float("nan") if v is None else float(v)
+    return out
+
+
 def weak_by_camera(cal) -> dict[str, set[str]]:
     return {name: {p for p, _e, _r in c.weak_views} for name, c in cal.intrinsics.items()}
 

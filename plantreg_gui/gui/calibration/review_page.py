@@ -12,10 +12,12 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QFormLayout, QGroupBox, QHB
                                QListWidget, QListWidgetItem, QPushButton, QSizePolicy, QSplitter,
                                QVBoxLayout, QWidget)
 
+from .page import WizardPage
 from .image_view import ImageView
 from .widgets import banner, qpixmap, set_banner, to_display
 
 STATUS_MARK = {"found": "✔", "failed": "✖", "missing": "—", None: "…"}
+REJECTED_MARK = "⊘"
 
 
 def coverage_map(detections, camera: str, excluded: set, max_side: int = 240) -> tuple[np.ndarray, tuple[int, int]] | None:
@@ -67,13 +69,11 @@ def empty_regions(acc: np.ndarray) -> list[str]:
     return out
 
 
-class ReviewPage(QWidget):
+class ReviewPage(WizardPage):
     title = "Corner review"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
         self.current: tuple[str, str] | None = None
         self._cache: OrderedDict = OrderedDict()
         lay = QHBoxLayout(self)
@@ -178,7 +178,9 @@ class ReviewPage(QWidget):
         self.model.detection_changed.connect(self._detection)
         self.model.review_changed.connect(self._review)
         self.model.calibration_changed.connect(self._relabel)
-        wizard.busy_changed.connect(self._busy)
+        self.model.view_selected.connect(lambda key: self.select(key[1], key[0]))
+        self.model.poses_changed.connect(self._fill_list)
+        actions.busy_changed.connect(self._busy)
 
     def _busy(self, busy: bool) -> None:
         self.redetect_btn.setEnabled(not busy and self.current is not None)
@@ -232,7 +234,8 @@ class ReviewPage(QWidget):
         st = getattr(d, "status", None)
         ex = key in self.model.excluded
         weak = self._weak.get(key)
-        it.setText(f"{STATUS_MARK.get(st, '?')} {key[0]} · {key[1]}" + ("  (rejected)" if ex else "")
+        mark = REJECTED_MARK if ex else STATUS_MARK.get(st, "?")  # a rejected view never shows a green tick
+        it.setText(f"{mark} {key[0]} · {key[1]}" + ("  (rejected)" if ex else "")
                    + (f"  (weak {weak:.2f} px)" if weak is not None and not ex else ""))
         col = {"found": "#1e7e34", "failed": "#b02a37", "missing": "#6c757d"}.get(st, "#000000")
         it.setForeground(QColor("#999999" if ex else ("#c65d00" if weak is not None else col)))
@@ -349,7 +352,7 @@ class ReviewPage(QWidget):
         inv = getattr(opts, "invert", None)
         self.polarity.setCurrentIndex(0 if inv is None else (2 if inv else 1))
         self.enhance.setChecked(bool(getattr(opts, "enhance", False)))
-        self.redetect_btn.setEnabled(not self.wizard.is_busy() and key[1] in self.model.session.pose(key[0]).images)
+        self.redetect_btn.setEnabled(not self.actions.is_busy() and key[1] in self.model.session.pose(key[0]).images)
         if d is not None and d.status == "failed":
             set_banner(self.info, f"Detection failed: {d.reason}. For a thermal image try the inverted polarity "
                                   "and contrast enhancement, then Re-detect.")
@@ -374,7 +377,7 @@ class ReviewPage(QWidget):
         return DetectOptions(invert=inv, enhance=self.enhance.isChecked(), detector=self.model.detector())
 
     def _detector_chosen(self, _index: int) -> None:
-        self.wizard.set_detector(self.detector.currentData())
+        self.actions.set_detector(self.detector.currentData())
         # refused while busy or without a session: show what is in use
         self.detector.blockSignals(True)
         self.detector.setCurrentIndex(max(0, self.detector.findData(self.model.detector())))
@@ -382,7 +385,7 @@ class ReviewPage(QWidget):
 
     def _redetect(self) -> None:
         if self.current is not None:
-            self.wizard.redetect(self.current, self.current_options())
+            self.actions.redetect(self.current, self.current_options())
 
     # ------------------------------------------------------------------ coverage
     def _update_coverage(self) -> None:

@@ -12,6 +12,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDoubleSpinBox, QFi
                                QSizePolicy, QSpinBox, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget)
 
 from ...core import modality
+from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
 MODALITIES = ["infrared", "visible", "thermal", "hyperspectral", "multispectral", "depth"]
@@ -19,13 +20,40 @@ DICTIONARIES = ["DICT_4X4_50", "DICT_4X4_100", "DICT_4X4_250", "DICT_5X5_100", "
                 "DICT_6X6_250", "DICT_7X7_250", "DICT_ARUCO_ORIGINAL"]
 
 
-class RigPage(QWidget):
+
+def parse_bands(text: str) -> list[float]:
+    """Band centres (nm) from 'FIRST-LAST/COUNT' (evenly spaced) or a list '450, 550, 650'."""
+    t = text.replace("nm", "").strip()
+    try:
+        if "/" in t:
+            span, n = t.split("/", 1)
+            a, b = (float(x) for x in span.replace("–", "-").split("-", 1))
+            n = int(n)
+            if n < 1 or not b > a:
+                raise ValueError
+            return [float(v) for v in np.linspace(a, b, n)] if n > 1 else [a]
+        vals = [float(x) for x in t.replace(";", ",").split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"'{text}' must be a list '450, 550, 650' or 'FIRST-LAST/COUNT' (nm)") from None
+    if not vals or any(v <= 0 for v in vals):
+        raise ValueError(f"'{text}' must be positive wavelengths in nm")
+    return vals
+
+
+def format_bands(bands) -> str:
+    """The inverse of :func:`parse_bands` (evenly spaced lists as 'FIRST-LAST/COUNT')."""
+    if not bands:
+        return ""
+    b = np.asarray(bands, float)
+    if len(b) > 3 and np.allclose(np.diff(b), (b[-1] - b[0]) / (len(b) - 1), rtol=0, atol=0.011):
+        return f"{b[0]:g}-{b[-1]:g}/{len(b)}"
+    return ", ".join(f"{v:g}" for v in b)
+
+class RigPage(WizardPage):
     title = "Rig and board"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
         self._loading = False
         outer = QVBoxLayout(self)
 
@@ -51,9 +79,17 @@ class RigPage(QWidget):
         # --- cameras
         cbox = QGroupBox("Cameras")
         cl = QVBoxLayout(cbox)
-        self.cameras = QTableWidget(0, 2)
-        self.cameras.setHorizontalHeaderLabels(["Name (= image file name)", "Modality"])
+        self.cameras = QTableWidget(0, 4)
+        self.cameras.setHorizontalHeaderLabels(["Name (= file name)", "Modality", "Units", "Bands (nm)"])
+        self.cameras.horizontalHeaderItem(2).setToolTip("What a pixel value means, e.g. degC, DN, reflectance "
+                                                        "(kept in the rig file)")
+        self.cameras.horizontalHeaderItem(3).setToolTip("Band centres of a multi-band camera in nm: a list "
+                                                        "'450, 550, 650' or evenly spaced 'FIRST-LAST/COUNT', e.g. "
+                                                        "'400-1000/100' (kept in the rig file; the registration "
+                                                        "shows spectra in nm with it)")
         self.cameras.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+        for col in (2, 3):  # units and bands take what they need; name and modality share the rest
+            self.cameras.horizontalHeader().setSectionResizeMode(col, QHeaderView.ResizeMode.ResizeToContents)
         self.cameras.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.cameras.itemChanged.connect(self._changed)
         self.cameras.setMaximumHeight(230)
@@ -159,6 +195,7 @@ class RigPage(QWidget):
         self._preview_timer.timeout.connect(self._update_preview)
         self._set_defaults()
         self.model.session_changed.connect(self.refresh)
+        self.model.poses_changed.connect(self._contents)
 
     # ------------------------------------------------------------------ form <-> session
     def _set_defaults(self) -> None:
@@ -173,10 +210,12 @@ class RigPage(QWidget):
         self._refresh_depth_combo("ir")
         self._changed()
 
-    def _add_camera(self, name: str, modality: str) -> None:
+    def _add_camera(self, name: str, modality: str, units: str = "", bands: str = "") -> None:
         r = self.cameras.rowCount()
         self.cameras.insertRow(r)
         self.cameras.setItem(r, 0, QTableWidgetItem(name))
+        self.cameras.setItem(r, 2, QTableWidgetItem(units))
+        self.cameras.setItem(r, 3, QTableWidgetItem(bands))
         combo = QComboBox()
         combo.setEditable(True)
         combo.addItems(MODALITIES)
@@ -221,7 +260,8 @@ class RigPage(QWidget):
         self.folder.setText(str(s.folder))
         self.cameras.setRowCount(0)
         for n, m in s.cameras.items():
-            self._add_camera(n, m)
+            meta = s.camera_meta.get(n, {})
+            self._add_camera(n, m, meta.get("units", ""), format_bands(meta.get("bands")))
         b = s.board
         self.btype.setCurrentText(b.type)
         self.columns.setValue(b.columns)
@@ -274,6 +314,7 @@ class RigPage(QWidget):
                 cams[n] = mod or "unknown"
         if not cams and not problems:
             problems.append("add at least one camera")
+        problems += self.camera_meta()[1]
         depth = self.depth_cam.currentText()
         depth = None if depth in ("", "none") else depth
         if depth is not None and depth not in cams:
@@ -288,6 +329,29 @@ class RigPage(QWidget):
         except ValueError as e:
             problems.append(str(e))
         return board, cams, depth, self.depth_scale.value(), problems
+
+    def camera_meta(self) -> tuple[dict[str, dict], list[str]]:
+        """Units and bands per camera from the table ({name: {"units", "bands"}}), and problems."""
+        meta: dict[str, dict] = {}
+        problems: list[str] = []
+        for r, n in enumerate(self._camera_names()):
+            m: dict = {}
+            units = self.cameras.item(r, 2).text().strip() if self.cameras.item(r, 2) else ""
+            text = self.cameras.item(r, 3).text().strip() if self.cameras.item(r, 3) else ""
+            if units:
+                m["units"] = units
+            known = (self.model.session.camera_meta.get(n, {}).get("bands")
+                     if self.model.session is not None else None)
+            if text and known and text == format_bands(known):
+                m["bands"] = list(known)  # unchanged: keep the file's values (the text rounds them)
+            elif text:
+                try:
+                    m["bands"] = parse_bands(text)
+                except ValueError as e:
+                    problems.append(f"camera '{n}': bands {e}")
+            if m and n:
+                meta[n] = m
+        return meta, problems
 
     def _changed(self, *_) -> None:
         if self._loading:
@@ -322,7 +386,8 @@ class RigPage(QWidget):
             return False
         cams = {n: modality.canonical(m) for n, m in cams.items()}  # the session holds canonical names
         return (board.to_dict() != s.board.to_dict() or cams != s.cameras or depth != s.depth_camera
-                or (depth is not None and abs(scale - s.depth_scale) > 1e-12))
+                or (depth is not None and abs(scale - s.depth_scale) > 1e-12)
+                or self.camera_meta()[0] != {n: m for n, m in s.camera_meta.items() if m})
 
     def _update_preview(self) -> None:
         board, *_rest, problems = self.form()
@@ -370,7 +435,7 @@ class RigPage(QWidget):
     def _open(self) -> None:
         d = QFileDialog.getExistingDirectory(self, "Open capture session (folder with session.json)")
         if d:
-            self.wizard.open_session(Path(d))
+            self.actions.open_session(Path(d))
 
     def _create(self) -> None:
         d = QFileDialog.getExistingDirectory(self, "Folder for the new capture session")
@@ -387,14 +452,25 @@ class RigPage(QWidget):
             return False
         try:
             s = Session.create(folder, board, cams, depth, scale)
+            s.camera_meta = self.camera_meta()[0]
+            s.save()
         except (PlantregError, OSError) as e:
             set_banner(self.message, f"⚠ {e}", error=True)
             return False
-        self.wizard.set_session(s)
+        self.actions.set_session(s)
         return True
 
     def _apply(self) -> None:
         self.apply_changes()
+
+    def leave(self) -> bool:
+        """Going on needs a session; edits not yet applied are applied first."""
+        if self.model.session is None:
+            set_banner(self.message, "⚠ Open a capture session (or create one) before going on.", error=True)
+            return False
+        if self.apply_btn.isEnabled():
+            self.apply_changes()
+        return True
 
     def apply_changes(self) -> bool:
         from ...core.errors import PlantregError
@@ -404,11 +480,12 @@ class RigPage(QWidget):
         if s is None or problems or board is None:
             return False
         s.board, s.cameras, s.depth_camera, s.depth_scale = board, cams, depth, scale
+        s.camera_meta = self.camera_meta()[0]
         try:
             s.save()
             s.rescan()
         except (PlantregError, OSError) as e:
             set_banner(self.message, f"⚠ cannot save the session: {e}", error=True)
             return False
-        self.wizard.set_session(s)
+        self.actions.set_session(s)
         return True

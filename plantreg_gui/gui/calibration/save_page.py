@@ -9,21 +9,21 @@ import numpy as np
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QFileDialog, QFormLayout, QGridLayout,
                                QGroupBox, QHBoxLayout, QLabel, QLineEdit, QMessageBox, QPushButton,
-                               QSizePolicy, QVBoxLayout, QWidget)
+                               QSizePolicy, QVBoxLayout)
 
+from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
 AXES = ("x", "y", "z")
+PREVIEW_SIDE = 400  # pixels: the depth preview's longer side
 
 
-class SavePage(QWidget):
+class SavePage(WizardPage):
     title = "Save"
 
-    def __init__(self, wizard) -> None:
-        super().__init__()
-        self.wizard = wizard
-        self.model = wizard.model
-        self._rays = None  # (cal id, rays (H*W, 3) z=1 in the depth camera frame)
+    def __init__(self, model, actions) -> None:
+        super().__init__(model, actions)
+        self._rays = None  # (calibration, step, grid shape, rays (h*w, 3) z=1 in the depth camera frame)
         self._depth_cache: dict[str, np.ndarray] = {}
         self.inside_fraction = float("nan")
         self._confirmed: set[str] = set()  # files the user agreed to replace
@@ -34,12 +34,20 @@ class SavePage(QWidget):
         g = QGroupBox("Region of interest (rig frame = depth camera frame; max z is the ground plane)")
         gl = QVBoxLayout(g)
         top = QHBoxLayout()
-        top.addWidget(QLabel("Depth map of pose:"))
+        top.addWidget(QLabel("Depth map:"))
+        # the calibration's board poses (to see the rig's view) and plant depth maps the user loads:
+        # only a plant's depth map can set the ROI (a box around a board ends where the board was)
         self.pose = QComboBox()
-        self.pose.currentIndexChanged.connect(self._schedule)
+        self.pose.currentIndexChanged.connect(self._source_changed)
         top.addWidget(self.pose, 1)
-        self.fit_btn = QPushButton("Fit ROI to this depth map")
-        self.fit_btn.setToolTip("Set the ROI to the 1st-99th percentile box of the measured points")
+        self.load_btn = QPushButton("Load plant depth map…")
+        self.load_btn.setToolTip("A depth map of a plant recording (depth.png / .tif, or the recording's "
+                                 "recording.json), taken with this rig: the ROI is fitted to it")
+        self.load_btn.clicked.connect(self._browse_plant)
+        top.addWidget(self.load_btn)
+        self.fit_btn = QPushButton("Fit ROI to the plant")
+        self.fit_btn.setToolTip("x, y: the measured view (1st-99th percentile); z: from just in front of the "
+                                "plant to 3 cm in front of the ground (the far surface)")
         self.fit_btn.clicked.connect(self.fit_roi)
         top.addWidget(self.fit_btn)
         gl.addLayout(top)
@@ -49,7 +57,8 @@ class SavePage(QWidget):
         self.image.setMinimumSize(320, 240)
         self.image.setStyleSheet("background: #202020; color: #dddddd;")
         gl.addWidget(self.image, 1)
-        self.legend = QLabel("Measured depth in colour inside the ROI; <span style='color:#c00000'><b>red</b></span>: "
+        self.legend = QLabel("Measured depth in grey inside the ROI (near = light); "
+                             "<span style='color:#c00000'><b>red</b></span>: "
                              "outside the ROI; <span style='color:#1060ff'><b>blue</b></span>: beyond the ground "
                              "plane (z > max z). <span style='color:#b8a000'><b>Yellow</b></span>: the ROI box; "
                              "<span style='color:#00a0a0'><b>cyan</b></span>: the ground plane (its 10 cm grid "
@@ -116,7 +125,8 @@ class SavePage(QWidget):
         self.model.session_changed.connect(self._session)
         self.model.calibration_changed.connect(self._calibration)
         self.model.report_changed.connect(self._summary)
-        wizard.busy_changed.connect(lambda b: self._buttons())
+        self.model.saved_changed.connect(lambda: self.saved(self.model.saved_paths))
+        actions.busy_changed.connect(lambda b: self._buttons())
 
     # ------------------------------------------------------------------ state
     def _session(self) -> None:
@@ -126,7 +136,9 @@ class SavePage(QWidget):
         self.pose.blockSignals(True)
         self.pose.clear()
         if s is not None:
-            self.pose.addItems([p.name for p in s.poses if p.depth is not None])
+            for p in s.poses:
+                if p.depth is not None:
+                    self.pose.addItem(f"{p.name} (calibration board)", ("pose", p.name))
             folder = Path(s.folder)
             self.rig_path.setText(str(folder / "calibrated.rig.json"))
             self.report_path.setText(str(folder / "calibration_report.json"))
@@ -166,8 +178,11 @@ class SavePage(QWidget):
     def _buttons(self) -> None:
         lo, hi = self.roi()
         ok_roi = bool(np.all(lo < hi))
-        self.save_btn.setEnabled(not self.wizard.is_busy() and self.model.calibration_ready() and ok_roi)
-        self.fit_btn.setEnabled(self.pose.count() > 0 and self.model.calibration is not None)
+        self.save_btn.setEnabled(not self.actions.is_busy() and self.model.calibration_ready() and ok_roi)
+        src = self.source()
+        self.fit_btn.setEnabled(src is not None and src[0] == "plant" and self.model.calibration is not None)
+        self.load_btn.setEnabled(self.model.calibration is not None and self.model.session is not None
+                                 and self.model.session.depth_camera is not None)
 
     def _summary(self) -> None:
         from . import results
@@ -198,46 +213,109 @@ class SavePage(QWidget):
         self._buttons()
         self._timer.start()
 
-    def _depth_m(self, pose: str) -> np.ndarray | None:
+    def source(self) -> tuple[str, str] | None:
+        """The shown depth map: ("pose", pose name) or ("plant", file path)."""
+        d = self.pose.currentData()
+        return tuple(d) if d else None
+
+    def _source_changed(self, *_) -> None:
+        self._schedule()
+
+    def _browse_plant(self) -> None:
+        f, _ = QFileDialog.getOpenFileName(self, "Depth map of a plant recording", "",
+                                           "Depth maps and recordings (*.png *.tif *.tiff recording.json);;All files (*)")
+        if f:
+            self.load_plant_depth(Path(f))
+
+    def load_plant_depth(self, path: Path) -> bool:
+        """Show the depth map of a plant recording (an image, or a recording.json naming one)
+        and fit the ROI to it. False (with a message) if it cannot be used."""
+        import json
+
+        path = Path(path)
+        try:
+            if path.suffix.lower() == ".json":
+                meta = json.loads(path.read_text())
+                if not isinstance(meta, dict) or not meta.get("depth"):
+                    raise ValueError("the recording has no depth map")
+                path = path.parent / str(meta["depth"])
+            d = self._read_depth(path)
+        except Exception as e:  # noqa: BLE001 -- any unreadable file is the same message
+            set_banner(self.roi_msg, f"⚠ {path}: cannot use it as a depth map ({e})", error=True)
+            return False
+        cam = self.model.calibration.rig.depth() if self.model.calibration is not None else None
+        if cam is not None and d.shape != (cam.height, cam.width):
+            set_banner(self.roi_msg, f"⚠ {path}: the depth map is {d.shape[1]}x{d.shape[0]}, the depth camera "
+                                     f"{cam.width}x{cam.height}", error=True)
+            return False
+        key = str(path)
+        self._depth_cache[key] = d
+        i = self.pose.findData(("plant", key))
+        if i < 0:
+            self.pose.addItem(f"plant: {path.parent.name}/{path.name}", ("plant", key))
+            i = self.pose.count() - 1
+        self.pose.setCurrentIndex(i)
+        if self.fit_roi():
+            set_banner(self.roi_msg, f"ROI fitted to the plant depth map {path.name}: check it below, then save.")
+        return True
+
+    def _read_depth(self, path: Path) -> np.ndarray:
         from ...core.imageio import read_image
 
-        if pose in self._depth_cache:
-            return self._depth_cache[pose]
-        s = self.model.session
-        try:
-            p = s.pose(pose)
-            d = read_image(p.depth).astype(np.float64) * s.depth_scale
-        except Exception:
-            return None
+        d = read_image(path)
         if d.ndim == 3:
             d = d[:, :, 0]
+        d = d.astype(np.float64) * self.model.session.depth_scale
         d[~(d > 0)] = np.nan
-        self._depth_cache = {pose: d}
+        return d
+
+    def _depth_m(self, source: tuple[str, str]) -> np.ndarray | None:
+        key = source[1] if source[0] == "plant" else f"pose:{source[1]}"
+        if key in self._depth_cache:
+            return self._depth_cache[key]
+        if source[0] != "pose":
+            return None
+        try:
+            d = self._read_depth(self.model.session.pose(source[1]).depth)
+        except Exception:
+            return None
+        # keep the plant maps the user loaded, and one board pose
+        self._depth_cache = {k: v for k, v in self._depth_cache.items() if not k.startswith("pose:")}
+        self._depth_cache[key] = d
         return d
 
     def points(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """Rig-frame points (H, W, 3) of the selected pose's depth map and the depth (H, W)."""
+        """Rig-frame points (h, w, 3) of the selected depth map and its depth (h, w), on a grid of
+        every ``step``-th pixel (see PREVIEW_SIDE)."""
         cal, s = self.model.calibration, self.model.session
-        pose = self.pose.currentText()
-        if cal is None or s is None or not pose or cal.rig.depth_camera is None:
+        src = self.source()
+        if cal is None or s is None or src is None or cal.rig.depth_camera is None:
             return None
-        d = self._depth_m(pose)
+        d = self._depth_m(src)
         if d is None:
             return None
         cam = cal.rig.depth()
         if d.shape != (cam.height, cam.width):
             return None
-        if self._rays is None or self._rays[0] is not cal:
-            self._rays = (cal, cam.rays_cam())  # (H*W, 3) z = 1, through the lens distortion
-        X_cam = self._rays[1] * d.reshape(-1, 1)  # depth maps hold z along the optical axis
-        X = cam.to_rig(X_cam).reshape(cam.height, cam.width, 3)
+        # a preview grid of at most ~PREVIEW_SIDE pixels a side: undistorting every pixel of the
+        # depth camera on the GUI thread took longer than a frame
+        step = max(1, int(np.ceil(max(cam.width, cam.height) / PREVIEW_SIDE)))
+        if self._rays is None or self._rays[0] is not cal or self._rays[1] != step:
+            v, u = np.mgrid[0:cam.height:step, 0:cam.width:step]
+            self._rays = (cal, step, u.shape, cam.rays_cam(np.c_[u.ravel(), v.ravel()].astype(np.float64)))
+        shape = self._rays[2]
+        d = np.ascontiguousarray(d[::step, ::step])
+        X_cam = self._rays[3] * d.reshape(-1, 1)  # depth maps hold z along the optical axis
+        X = cam.to_rig(X_cam).reshape(shape[0], shape[1], 3)
         return X, d
 
     def _draw(self) -> None:
+        if not self.isVisible():
+            return  # drawn when shown (showEvent)
         lo, hi = self.roi()
         if not np.all(lo < hi):
             set_banner(self.roi_msg, "⚠ ROI min must be below max in x, y and z", error=True)
-        else:
+        elif "min must be below" in self.roi_msg.text():
             set_banner(self.roi_msg, "")
         if self.model.session is not None and self.model.session.depth_camera is None:
             self.image.setText("This rig has no depth camera: the ROI is stored in the rig file, "
@@ -255,8 +333,9 @@ class SavePage(QWidget):
         lo_d, hi_d = np.nanpercentile(d, [1, 99])
         norm = np.clip((d - lo_d) / max(hi_d - lo_d, 1e-6), 0, 1)
         norm = np.nan_to_num(norm, nan=0.0)
-        rgb = cv2.cvtColor(cv2.applyColorMap((norm * 255).astype(np.uint8), cv2.COLORMAP_TURBO),
-                           cv2.COLOR_BGR2RGB).astype(np.float32)
+        # grey, near = light: red, blue, yellow and cyan are reserved for the overlays (legend)
+        grey = 230.0 - 170.0 * norm
+        rgb = np.repeat(grey[:, :, None], 3, axis=2).astype(np.float32)
         with np.errstate(invalid="ignore"):
             inside = finite & np.all((X >= lo) & (X <= hi), axis=2)
             below = finite & (X[:, :, 2] > hi[2])
@@ -269,15 +348,17 @@ class SavePage(QWidget):
         edge = cv2.morphologyEx(mask, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8)) > 0
         rgb[edge & finite] = (0, 220, 220)
         img = np.clip(rgb, 0, 255).astype(np.uint8)
+        self.preview_rgb, self.preview_inside, self.preview_outside = img, inside, outside
         self.inside_fraction = float(inside.sum() / max(finite.sum(), 1))
+        self._roi_banner(X, lo, hi)
         pm = qpixmap(img)
-        self._overlay_roi(pm, lo, hi)
+        self._overlay_roi(pm, lo, hi, self._rays[1])
         sz = self.image.size()
         self.image.setPixmap(pm.scaled(max(sz.width() - 4, 50), max(sz.height() - 4, 50),
                                        Qt.AspectRatioMode.KeepAspectRatio, Qt.TransformationMode.SmoothTransformation))
         self.image.setToolTip(f"{100 * self.inside_fraction:.0f} % of the measured pixels inside the ROI")
 
-    def _overlay_roi(self, pm, lo: np.ndarray, hi: np.ndarray) -> None:
+    def _overlay_roi(self, pm, lo: np.ndarray, hi: np.ndarray, step: int = 1) -> None:
         """Draw the ROI box (yellow) and a 10 cm grid on its ground face z = max z (cyan), projected
         through the calibrated depth camera, so they show even where the depth map is empty."""
         from PySide6.QtCore import QPointF
@@ -286,6 +367,7 @@ class SavePage(QWidget):
         cam = self.model.calibration.rig.depth()
         p = QPainter(pm)
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
+        p.scale(1.0 / step, 1.0 / step)  # projected pixels are full-resolution; the preview every step-th
 
         def polyline(a, b, pen) -> None:
             X = np.linspace(a, b, 60)
@@ -297,34 +379,61 @@ class SavePage(QWidget):
                     p.drawLine(QPointF(*uv[i]), QPointF(*uv[i + 1]))
 
         grid = QPen(QColor(0, 220, 220, 170), 1.0)
+        grid.setCosmetic(True)
         step = 0.1
         for x in np.arange(np.ceil(lo[0] / step) * step, hi[0] + 1e-9, step):
             polyline([x, lo[1], hi[2]], [x, hi[1], hi[2]], grid)
         for y in np.arange(np.ceil(lo[1] / step) * step, hi[1] + 1e-9, step):
             polyline([lo[0], y, hi[2]], [hi[0], y, hi[2]], grid)
         box = QPen(QColor(255, 220, 0, 230), 2.0)
+        box.setCosmetic(True)
         c = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])])
         for i, j in ((0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)):
             polyline(c[i], c[j], box)
+        p.resetTransform()
         p.setPen(QColor(0, 230, 230))
         f = p.font()
-        f.setPixelSize(max(12, pm.height() // 40))
+        f.setPixelSize(max(8, pm.height() // 32))  # the preview is shown scaled up
         f.setBold(True)
         p.setFont(f)
-        p.drawText(8, pm.height() - 10, f"ground plane z = {hi[2]:.2f} m (cyan grid, 10 cm); ROI box in yellow")
+        p.drawText(4, pm.height() - 4, f"ground plane z = {hi[2]:.2f} m")
         p.end()
 
-    def fit_roi(self) -> None:
+    def _roi_banner(self, X: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Say what the ROI does to a plant's depth map; ask for one while none is loaded."""
+        from ...core.roi import CUT_WARN_FRACTION, cut_fraction
+
+        if not np.all(lo < hi):
+            return
+        src = self.source()
+        plants = [self.pose.itemData(i) for i in range(self.pose.count()) if self.pose.itemData(i)[0] == "plant"]
+        if src is not None and src[0] == "plant":
+            frac, n = cut_fraction(X, lo, hi)  # the same test as registration's warning
+            if n >= 100 and frac > CUT_WARN_FRACTION:
+                set_banner(self.roi_msg, f"⚠ The ROI leaves out {100 * frac:.0f} % of the plant's measured scene: "
+                                         "the registration would keep only part of the plant. 'Fit ROI to the "
+                                         "plant' or widen it.", error=True)
+            elif "⚠" in self.roi_msg.text():
+                set_banner(self.roi_msg, "")
+        elif not plants:
+            set_banner(self.roi_msg, "Set the ROI from a plant: 'Load plant depth map…' (a recording of a plant "
+                                     "with this rig). The board poses only show where the board was.")
+
+    def fit_roi(self) -> bool:
+        """Fit the ROI to the shown plant depth map (core.roi.fit_roi); False for a board pose."""
+        from ...core.roi import fit_roi
+
+        src = self.source()
         res = self.points()
-        if res is None:
-            return
-        X = res[0].reshape(-1, 3)
-        X = X[np.all(np.isfinite(X), axis=1)]
-        if len(X) < 10:
-            return
-        lo = np.percentile(X, 1, axis=0) - 0.02
-        hi = np.percentile(X, 99, axis=0) + 0.02
+        if res is None or src is None or src[0] != "plant":
+            return False
+        try:
+            lo, hi = fit_roi(res[0])
+        except ValueError as e:
+            set_banner(self.roi_msg, f"⚠ {e}", error=True)
+            return False
         self._set_roi(np.round(lo, 3), np.round(hi, 3))
+        return True
 
     def resizeEvent(self, event) -> None:  # noqa: N802
         super().resizeEvent(event)
@@ -372,7 +481,7 @@ class SavePage(QWidget):
                 set_banner(self.message, "Not saved: choose other file names, or save again and confirm.")
                 return
             self._confirmed.update(str(p) for p in existing)
-        self.wizard.save_outputs(rig_path, rep_path, lo, hi)
+        self.actions.save_outputs(rig_path, rep_path, lo, hi)
 
     def saved(self, paths: dict[str, str]) -> None:
         set_banner(self.message, "Saved " + ", ".join(paths.values()))

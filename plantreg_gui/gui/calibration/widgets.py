@@ -11,6 +11,8 @@ from PySide6.QtGui import QColor, QFont, QImage, QPixmap
 from PySide6.QtWidgets import (QAbstractItemView, QHeaderView, QLabel, QSizePolicy, QTableWidget,
                                QTableWidgetItem)
 
+from ...core.calibration.preview import thumbnail, to_display  # noqa: F401  (used by the pages)
+
 #: Colour grade of the error tables, on the *normalised* error (px * 1000 / sqrt(h w)):
 #: green at 0, yellow at GRADE_MID, red from GRADE_MAX on. The paper's real rig reaches
 #: 0.1-2 normalised; above 3 a technician should look at the views.
@@ -22,43 +24,6 @@ CAMERA_COLOURS = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564
 
 def camera_colour(i: int) -> str:
     return CAMERA_COLOURS[i % len(CAMERA_COLOURS)]
-
-
-def to_display(img: np.ndarray) -> np.ndarray:
-    """Any image (H, W) / (H, W, C) of any dtype -> uint8 (H, W) or (H, W, 3) for display.
-
-    Non-8-bit images (16-bit IR, float thermal) are stretched between the 1st and 99th
-    percentile; multi-band cubes show their mean band.
-    """
-    a = np.asarray(img)
-    if a.ndim == 3 and a.shape[2] not in (3, 4):
-        a = a.astype(np.float32).mean(axis=2)
-    if a.ndim == 3 and a.shape[2] == 4:
-        a = a[:, :, :3]
-    if a.dtype == np.uint8:
-        return np.ascontiguousarray(a)
-    f = a.astype(np.float32)
-    finite = np.isfinite(f)
-    if not finite.any():
-        return np.zeros(f.shape, np.uint8)
-    lo, hi = np.percentile(f[finite], [1, 99])
-    if not hi > lo:
-        hi = lo + 1.0
-    out = np.clip((f - lo) / (hi - lo) * 255.0, 0, 255)
-    out[~finite] = 0
-    return out.astype(np.uint8)
-
-
-def thumbnail(img: np.ndarray, size: int = 120) -> np.ndarray:
-    """uint8 display thumbnail whose longer side is ``size`` pixels."""
-    import cv2
-
-    d = to_display(img)
-    h, w = d.shape[:2]
-    s = size / max(h, w)
-    if s < 1:
-        d = cv2.resize(d, (max(1, round(w * s)), max(1, round(h * s))), interpolation=cv2.INTER_AREA)
-    return np.ascontiguousarray(d)
 
 
 def qimage(a: np.ndarray) -> QImage:
@@ -164,10 +129,13 @@ def fill_matrix(table: QTableWidget, names: list[str], cell: dict, what: str) ->
     table.setFont(f)
 
 
-def grade_legend() -> QLabel:
+MATRIX_LEGEND = ("Rows: origin camera, columns: target camera. Cells: mean error in pixels of the target and "
+                 "normalised (× 1000/√(h·w) of the target).")
+
+
+def grade_legend(intro: str = MATRIX_LEGEND) -> QLabel:
     lab = QLabel(
-        f"Rows: origin camera, columns: target camera. Cells: mean error in pixels of the target and "
-        f"normalised (× 1000/√(h·w) of the target). Colour on the normalised error: "
+        f"{intro} Colour on the normalised error: "
         f"<span style='background:{grade_colour(0).name()}'>&nbsp;good&nbsp;</span> "
         f"<span style='background:{grade_colour(GRADE_MID).name()}'>&nbsp;{GRADE_MID:g}&nbsp;</span> "
         f"<span style='background:{grade_colour(GRADE_MAX).name()}'>&nbsp;≥ {GRADE_MAX:g}&nbsp;</span>"

@@ -13,15 +13,16 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-from PySide6.QtCore import QObject, QStandardPaths, Signal, Slot
+from PySide6.QtCore import QObject, QStandardPaths, QTimer, Signal, Slot
 from PySide6.QtWidgets import (QHBoxLayout, QLabel, QListWidget, QListWidgetItem, QProgressBar,
-                               QPushButton, QStackedWidget, QVBoxLayout, QWidget)
+                               QPushButton, QSizePolicy, QStackedWidget, QVBoxLayout, QWidget)
 
 from ..workers import Worker, show_error
 from . import jobs
 from .capture_page import CapturePage
 from .depth_page import DepthPage
 from .extrinsics_page import ExtrinsicsPage
+from .frusta_view import preload as preload_3d
 from .intrinsics_page import IntrinsicsPage
 from .model import WizardModel
 from .review_page import ReviewPage
@@ -29,9 +30,12 @@ from .rig_page import RigPage
 from .save_page import SavePage
 
 #: What each page needs computed before it can show its content.
+STEPS = ("detect", "calibrate", "tables")
 NEEDS = {1: (), 2: ("detect",), 3: ("detect",), 4: ("detect", "calibrate"),
          5: ("detect", "calibrate", "tables"), 6: ("detect", "calibrate", "tables"),
          7: ("detect", "calibrate", "tables")}
+
+PROGRESS_HZ = 5
 
 
 class _Relay(QObject):
@@ -55,8 +59,13 @@ class CalibrationWizard(QWidget):
         self._relay = _Relay(self)
         self._relay.detection.connect(self._on_detection)
         self._job_session = None
+        self._job_step = ""  # the running step of STEPS, or another job's title
         self._on_result: Callable[[Any], None] | None = None
         self._demo_folder: Path | None = None
+        self._pending_progress: tuple[float, str] | None = None
+        self._progress_timer = QTimer(self)
+        self._progress_timer.setInterval(1000 // PROGRESS_HZ)
+        self._progress_timer.timeout.connect(self._show_progress)
         self.last_error: str | None = None
 
         root = QHBoxLayout(self)
@@ -72,8 +81,9 @@ class CalibrationWizard(QWidget):
         self.stack = QStackedWidget()
         right.addWidget(self.stack, 1)
 
-        self.pages = [RigPage(self), CapturePage(self), ReviewPage(self), IntrinsicsPage(self),
-                      ExtrinsicsPage(self), DepthPage(self), SavePage(self)]
+        # pages see the model and this wizard only through the WizardActions interface (page.py)
+        self.pages = [cls(self.model, self) for cls in (RigPage, CapturePage, ReviewPage, IntrinsicsPage,
+                                                         ExtrinsicsPage, DepthPage, SavePage)]
         for i, p in enumerate(self.pages):
             self.stack.addWidget(p)
             QListWidgetItem(f"{i + 1}  {p.title}", self.steps)
@@ -82,6 +92,8 @@ class CalibrationWizard(QWidget):
         bar = QHBoxLayout()
         self.status = QLabel("")
         self.status.setMinimumWidth(260)
+        # progress text must not change the layout: a relayout repaints (and re-renders) every page
+        self.status.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         self.progress = QProgressBar()
         self.progress.setRange(0, 1000)
         self.progress.setTextVisible(True)
@@ -137,6 +149,10 @@ class CalibrationWizard(QWidget):
         self.model.set_session(session)
         self._update_nav()
         if session.poses:
+            from ...core.process_job import warm_up
+
+            warm_up()  # the calibration's process starts importing while corners are detected
+            preload_3d()  # and the 3D view's libraries on a thread, not on the GUI thread later
             self._ensure(("detect",))
 
     def go_to_page(self, n: int) -> None:
@@ -156,6 +172,13 @@ class CalibrationWizard(QWidget):
 
     def is_busy(self) -> bool:
         return (self._worker is not None) or bool(self._queue)
+
+    def page_busy(self) -> bool:
+        """Busy with work the current page needs (see NEEDS): detection running in the background
+        does not make page 1 busy; writing the demo or saving always does."""
+        needs = set(NEEDS[self.page])
+        running = self._worker is not None and (self._job_step in needs or self._job_step not in STEPS)
+        return running or any(s in needs for s in self._queue)
 
     def shutdown(self) -> None:
         """Cancel and wait for all work; close the 3D view (safe to call twice)."""
@@ -178,15 +201,8 @@ class CalibrationWizard(QWidget):
 
     # ------------------------------------------------------------------ navigation
     def _next(self) -> None:
-        if self.page == 1:
-            rp: RigPage = self.pages[0]
-            if self.model.session is None:
-                from .widgets import set_banner
-
-                set_banner(rp.message, "⚠ Open a capture session (or create one) before going on.", error=True)
-                return
-            if rp.apply_btn.isEnabled():
-                rp.apply_changes()
+        if not self.pages[self.page - 1].leave():
+            return
         self.go_to_page(self.page + 1)
 
     def _update_nav(self) -> None:
@@ -196,7 +212,7 @@ class CalibrationWizard(QWidget):
     def show_view(self, camera: str, pose: str) -> None:
         """Open one image in the corner review (page 3)."""
         self.go_to_page(3)
-        self.pages[2].select(camera, pose)
+        self.model.select_view((pose, camera))
 
     # ------------------------------------------------------------------ actions the pages ask for
     def run_detection(self, keys: set | None = None) -> None:
@@ -204,10 +220,7 @@ class CalibrationWizard(QWidget):
         if self.model.session is None or self.is_busy():
             return
         if keys is None:
-            self.model.detections.clear()
-            self.model.thumbnails.clear()
-            self.model.invalidate_calibration()
-            self.model.detection_changed.emit(None)
+            self.model.clear_detections()
         self._start_detection(keys, self.model.options())
 
     def redetect(self, key, options) -> None:
@@ -230,10 +243,7 @@ class CalibrationWizard(QWidget):
         if self.model.session is None:
             return
         self.model.invalidate_calibration()
-        steps = ["detect", "calibrate"] + (["tables"] if self.page >= 5 else [])
-        if self.model.calibration is not None:
-            self.model.calibration_stale = True
-        self._ensure(steps)
+        self._ensure(["detect", "calibrate"] + (["tables"] if self.page >= 5 else []))
 
     def save_outputs(self, rig_path: Path, report_path: Path | None, roi_min: np.ndarray, roi_max: np.ndarray) -> None:
         """Write the rig file and the report (+ CSV tables) on a worker."""
@@ -307,6 +317,8 @@ class CalibrationWizard(QWidget):
         w = Worker(fn, *args, parent=self)
         self._worker = w
         self._job_name = title
+        self._job_step = {"Detecting corners": "detect", "Calibrating": "calibrate",
+                          "Computing error tables": "tables"}.get(title, title)
         self._on_result = on_result
         w.progress.connect(self._on_progress)
         w.finished.connect(self._on_finished)
@@ -325,12 +337,24 @@ class CalibrationWizard(QWidget):
 
     @Slot(float, str)
     def _on_progress(self, f: float, msg: str) -> None:
+        # at most PROGRESS_HZ repaints: every repaint of the window also re-renders the 3D view
+        self._pending_progress = (f, msg)
+        if not self._progress_timer.isActive():
+            self._show_progress()
+            self._progress_timer.start()
+
+    def _show_progress(self) -> None:
+        if self._pending_progress is None:
+            return
+        f, msg = self._pending_progress
+        self._pending_progress = None
         self.progress.setValue(int(1000 * f))
         self.progress.setFormat(f"{100 * f:.0f} %")
         self.status.setText(f"{self._job_name}: {msg}" if msg else self._job_name)
 
     @Slot(object)
     def _on_finished(self, result) -> None:
+        self._pending_progress = None
         self.status.setText(f"{self._job_name}: done")
         self.progress.setValue(1000)
         cb = self._on_result
@@ -362,8 +386,7 @@ class CalibrationWizard(QWidget):
         self._run_next()
 
     def _on_saved(self, paths: dict) -> None:
-        self.model.saved_paths = dict(paths)
-        self.pages[6].saved(paths)
+        self.model.set_saved_paths(paths)
         self.saved.emit(dict(paths))
 
     def _set_busy(self, busy: bool) -> None:

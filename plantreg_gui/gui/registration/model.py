@@ -144,7 +144,8 @@ def raw_layers(rig: Any | None, recording: Any) -> list[Layer]:
     """The recording's raw images (depth first, in mm when the rig gives the scale)."""
     layers = []
     if recording.depth is not None:
-        d = to_millimetres(recording.depth, rig.depth_scale if rig is not None else 0.001)
+        scale = getattr(recording, "depth_scale", None) or (rig.depth_scale if rig is not None else 0.001)
+        d = to_millimetres(recording.depth, scale)
         layers.append(Layer(DEPTH, DEPTH, d, None, "mm"))
     for name, img in recording.images.items():
         cam = None

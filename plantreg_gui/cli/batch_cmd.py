@@ -1,0 +1,148 @@
+"""``plantreg batch``: register many recordings of one rig, locally or on a Dask cluster.
+
+    plantreg batch --rig RIG --target NAME --out OUT [--workers N] [--scheduler ADDRESS]
+                   [--overwrite] [--outputs PARTS] [--edge-angle DEG] [--quiet]
+                   RECORDING [RECORDING ...]
+
+A RECORDING is a recording folder, or a text/CSV file listing one per line. Each goes to
+``OUT/<recording folder name>/`` in ``plantreg register``'s layout; ``OUT/batch.csv`` has one
+row per recording (status done / skipped / failed, the error, case shares, timings, files).
+A re-run skips recordings whose output is complete and made from the same inputs and
+parameters. Exit code 1 if any recording failed. Engine: :mod:`plantreg_gui.core.batch`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from ..core.errors import InputError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from . import finite_float, nonempty_path
+    from .register_cmd import add_output_options
+
+    p = sub.add_parser(
+        "batch",
+        help="register many recordings of one rig (local processes or a Dask cluster)",
+        description="Register many recordings of one rig into OUT/<recording>/ (plantreg register's layout) "
+        "and write OUT/batch.csv. Re-runs skip recordings already done with the same inputs and parameters.",
+    )
+    p.add_argument("recordings", nargs="+", metavar="RECORDING",
+                   help="recording folder, or a text/CSV file listing one recording folder per line")
+    p.add_argument("--rig", required=True, type=nonempty_path, metavar="RIG", help="rig file (plantreg.rig JSON)")
+    p.add_argument("--target", required=True, metavar="NAME", help="name of the target camera")
+    p.add_argument("--out", required=True, type=nonempty_path, metavar="OUT", help="output folder (one sub-folder per recording)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="local worker processes (default: the number of cores)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on a Dask distributed cluster (e.g. tcp://host:8786) instead of local processes; "
+                   "the workers must see the same file system")
+    p.add_argument("--edge-angle", type=finite_float, default=None, metavar="DEG",
+                   help="mesh edge-cut angle in degrees (default 15, as in the paper)")
+    add_output_options(p)
+    p.add_argument("--overwrite", action="store_true",
+                   help="register every recording again, replacing existing output folders")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(run=run)
+    return p
+
+
+class _Progress:
+    """Count, rate and ETA on stderr: a tqdm bar on a terminal, plain lines otherwise."""
+
+    def __init__(self, total: int, quiet: bool):
+        self.total, self.quiet, self.n, self.t0 = total, quiet, 0, time.monotonic()
+        self.bar = None
+        if not quiet and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, unit="rec", file=sys.stderr, dynamic_ncols=True)
+
+    def update(self, row: dict) -> None:
+        self.n += 1
+        if self.quiet:
+            return
+        note = f"{row['name']}: {row['status']}" + (f" ({row['error']})" if row.get("error") else "")
+        if self.bar is not None:
+            self.bar.set_postfix_str(note[:60], refresh=False)
+            self.bar.update(1)
+            if row["status"] == "failed":
+                self.bar.write(f"failed: {note}", file=sys.stderr)
+            return
+        dt = time.monotonic() - self.t0
+        rate = self.n / dt if dt > 0 else 0.0
+        eta = (self.total - self.n) / rate if rate > 0 else float("nan")
+        print(f"[{self.n}/{self.total}] {note}  {rate:.2f} rec/s, ETA {eta:.0f} s", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..core import batch
+    from ..core.export import check_output_spares_inputs, parse_outputs
+    from ..core.register import RegistrationParams
+    from ..core.rig import Rig
+
+    rig_path = args.rig.absolute()
+    rig = Rig.load(rig_path)
+    try:
+        rig.depth()
+    except InputError as e:
+        raise InputError(f"{e.detail}; registration needs a depth camera", rig_path) from None
+    if args.target not in rig.names:
+        raise InputError(f"unknown target camera '{args.target}'; the rig has {', '.join(rig.names)}", rig_path)
+    what = parse_outputs(args.outputs)
+    params = RegistrationParams()
+    if args.edge_angle is not None:
+        if not 0.0 < args.edge_angle < 90.0:
+            raise InputError(f"--edge-angle must be between 0 and 90 degrees, got {args.edge_angle:g}")
+        params.edge_angle_deg = float(args.edge_angle)
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers must be at least 1, got {args.workers}")
+    out = args.out.absolute()
+    if out.exists() and not out.is_dir():
+        raise InputError("output path exists and is not a folder", out)
+    jobs = batch.plan(batch.expand_inputs(args.recordings), out)  # name clashes: refused before any work
+    check_output_spares_inputs(out, [rig_path] + [Path(j.recording) for j in jobs])
+    out.mkdir(parents=True, exist_ok=True)
+    settings = batch.BatchSettings(rig=str(rig_path), target=args.target, out=str(out), params=params.to_dict(),
+                                   outputs=what, overwrite=bool(args.overwrite),
+                                   tiff_codec=args.tiff_codec)
+    workers = args.workers or os.cpu_count() or 1
+    rows_iter = batch.run(settings, jobs, workers, args.scheduler)
+    engine = f"Dask scheduler {args.scheduler}" if args.scheduler else f"up to {workers} local worker process(es)"
+    if not args.quiet:
+        print(f"plantreg batch: {len(jobs)} recording(s) on {engine}", file=sys.stderr, flush=True)
+
+    order = {j.name: i for i, j in enumerate(jobs)}
+    rows: dict[str, dict] = {}
+    progress = _Progress(len(jobs), args.quiet)
+    csv_path = out / batch.BATCH_CSV
+    t0 = time.monotonic()
+    last_csv = 0.0
+    try:
+        for row in rows_iter:
+            rows[row["name"]] = row
+            progress.update(row)
+            if time.monotonic() - last_csv > 2.0:  # a crash of this process still leaves a table behind
+                batch.write_csv(csv_path, sorted(rows.values(), key=lambda r: order[r["name"]]))
+                last_csv = time.monotonic()
+    finally:
+        progress.close()
+        if rows:
+            batch.write_csv(csv_path, sorted(rows.values(), key=lambda r: order[r["name"]]))
+    wall = time.monotonic() - t0
+    counts = {s: sum(1 for r in rows.values() if r["status"] == s) for s in ("done", "skipped", "failed")}
+    print(f"{len(jobs)} recording(s): {counts['done']} done, {counts['skipped']} skipped, {counts['failed']} failed "
+          f"in {wall:.1f} s; wrote {csv_path}")
+    for r in sorted(rows.values(), key=lambda r: order[r["name"]]):
+        if r["status"] == "failed":
+            print(f"  failed {r['recording']}: {r['error']}")
+    return 1 if counts["failed"] or len(rows) < len(jobs) else 0

@@ -1,0 +1,118 @@
+"""``plantreg fit-rig``: fit a rig's cameras to landmarks clicked in the recordings themselves.
+
+    plantreg fit-rig --rig START --landmarks LANDMARKS.json --out RIG
+                     [--free focal,principal,k1] [--refine] [--recording DIR ...] [--overwrite] [--quiet]
+
+Writes a normal rig file whose ``"calibration"`` entry records the method, the landmarks used,
+every residual and the leave-one-recording-out residuals, and prints the per-camera residual
+table with the worst landmarks (see docs/fit-rig.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+from ..core.errors import InputError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "fit-rig",
+        help="fit camera poses (and optionally intrinsics) from landmark pairs",
+        description="Fit every camera's pose -- and, with --free, focal length, principal point and first "
+        "radial distortion term, the depth camera's included -- to landmarks: depth-camera pixels and the "
+        "same points clicked in other cameras (a plantreg.landmarks JSON file). All recordings are fitted "
+        "jointly, robustly, with weak priors towards the start rig.",
+    )
+    p.add_argument("--rig", required=True, type=Path, metavar="START", help="start rig (plantreg.rig JSON)")
+    p.add_argument("--landmarks", required=True, type=Path, metavar="LANDMARKS.json",
+                   help="landmarks file (plantreg.landmarks JSON; recording paths relative to it)")
+    p.add_argument("--out", required=True, type=Path, metavar="RIG", help="fitted rig file to write")
+    p.add_argument("--free", default="", metavar="ITEMS",
+                   help="intrinsics to fit: comma-separated focal, principal, k1 (every camera, the depth camera "
+                        "included) or CAMERA:ITEM for one camera, e.g. 'focal,ir:k1,ir:principal'")
+    p.add_argument("--refine", action="store_true",
+                   help="then refine the rig automatically from the images (see docs/fit-rig.md)")
+    p.add_argument("--recording", action="append", type=Path, default=[], metavar="DIR",
+                   help="more recordings for --refine (repeatable)")
+    p.add_argument("--worst", type=int, default=10, metavar="N", help="worst landmarks to list (default 10)")
+    p.add_argument("--overwrite", action="store_true", help="replace RIG if it exists")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(run=run)
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import cli
+    from ..core.landmarks import LandmarkSet
+    from ..core.rig import Rig
+    from ..core.rigfit import fit_rig_from_file, format_report, parse_free
+
+    out: Path = args.out
+    if out.exists() and not args.overwrite:
+        raise InputError("output rig file exists (choose another, or pass --overwrite)", out)
+    if out.exists() and out.resolve() == Path(args.landmarks).resolve():
+        raise InputError("--out is the landmarks file; write the rig elsewhere", out)
+    if out.is_dir():
+        raise InputError("output path is a folder, not a file", out)
+    if not out.absolute().parent.is_dir():
+        raise InputError("the folder for the output rig does not exist", out.absolute().parent)
+    if args.recording and not args.refine:
+        raise InputError("--recording adds recordings for --refine; pass --refine too")
+    free = parse_free(args.free)
+    rig = Rig.load(args.rig)
+    try:
+        rig.depth()
+    except InputError as e:
+        raise InputError(f"{e.detail}; a landmark fit needs the depth camera", args.rig) from None
+    landmarks = LandmarkSet.load(args.landmarks)
+    if landmarks.count() > 0:
+        result = fit_rig_from_file(rig, landmarks, free=free)
+        fitted, report, warnings = result.rig, result.report, list(result.warnings)
+        method = "landmarks"
+    elif args.refine:  # no points: refine from the images alone, starting from the start rig
+        landmarks.check_recordings()
+        fitted, report, warnings, method = rig, {"landmarks_used": 0}, [], "refine"
+    else:
+        raise InputError("the landmarks file has no points (add some, or pass --refine to refine from the "
+                         "images alone)", args.landmarks)
+    if args.refine:
+        # the refinement is its own module (core/refine.py); imported only when asked for
+        from ..core.recording import Recording
+        from ..core.refine import refine_rig
+        from ..core.progress import Reporter
+
+        folders = [landmarks.folder(k).resolve() for k in landmarks.recordings]
+        folders += [f.resolve() for f in args.recording if f.resolve() not in folders]
+        recordings = [Recording.load(f, fitted) for f in folders]
+        # keys as absolute folders: they match the recordings whatever the landmarks file's relative paths
+        by_folder = {str(landmarks.folder(k).resolve()): pts for k, pts in landmarks.recordings.items()}
+        rr = refine_rig(fitted, recordings, free=free, landmarks=by_folder,
+                        progress=Reporter(cli.StderrProgress(quiet=args.quiet)))
+        fitted, method = rr.rig, ("landmarks+refine" if report.get("landmarks_used") else "refine")
+        report["refine"] = rr.report
+        warnings += list(rr.warnings)
+    previous = rig.extra.get("calibration")
+    fitted.extra["calibration"] = {
+        "method": method,
+        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "command": "plantreg " + " ".join(getattr(args, "argv", []) or sys.argv[1:]),
+        "start_rig": str(Path(args.rig).resolve()),
+        "landmarks_file": str(Path(args.landmarks).resolve()),
+        **{k: v for k, v in report.items() if k not in ("time_s", "method")},
+        "warnings": warnings,
+        **({"previous_method": previous.get("method")} if isinstance(previous, dict) and previous.get("method")
+           else {}),
+    }
+    fitted.save(out)
+    if report.get("landmarks_used"):
+        print(format_report(report, worst=args.worst))
+    if "refine" in report:
+        print("refinement: see \"calibration\".\"refine\" in the rig file")
+    for w in warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,77 @@
+"""The region of interest (ROI) against a plant's depth map: fit it, and check what it cuts off.
+
+The ROI is an axis-aligned box in the rig frame (= depth camera frame, z away from the camera);
+its max z is the ground plane: the scene beyond it (the ground, the table, the background) is
+not the plant. It must come from a depth map *with the plant in view* -- a box fitted to a
+calibration board's pose ends where the board was (e.g. 0.56 m) and registration then keeps one
+leaf of a plant standing 0.6-1.2 m away without any other sign of failure.
+
+The far surface is found as the 95th percentile of the measured z (the ground or background
+fills much of a phenotyping view); what lies more than ``FAR_MARGIN_M`` in front of it is "the
+scene", which the ROI must contain.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+FAR_PERCENTILE = 95.0
+FAR_MARGIN_M = 0.05  # the scene: points this far in front of the far surface, or more
+GROUND_CLEARANCE_M = 0.03  # a fitted ground plane sits this far in front of the far surface
+CUT_WARN_FRACTION = 0.5
+
+
+def _finite(points: np.ndarray) -> np.ndarray:
+    X = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    return X[np.all(np.isfinite(X), axis=1)]
+
+
+def scene_points(points: np.ndarray) -> np.ndarray:
+    """The measured points (N, 3) in front of the far surface (ground/background) of ``points``
+    (..., 3) rig frame, NaN = no measurement."""
+    X = _finite(points)
+    if not len(X):
+        return X
+    z_far = np.percentile(X[:, 2], FAR_PERCENTILE)
+    return X[X[:, 2] < z_far - FAR_MARGIN_M]
+
+
+def cut_fraction(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[float, int]:
+    """Fraction of the scene's points (see :func:`scene_points`) outside the ROI [lo, hi] (3,),
+    and their number. (0.0, 0) when the depth map shows no scene in front of a far surface."""
+    S = scene_points(points)
+    if not len(S):
+        return 0.0, 0
+    inside = np.all((S >= np.asarray(lo, float)) & (S <= np.asarray(hi, float)), axis=1)
+    return float(1.0 - inside.mean()), int(len(S))
+
+
+def cut_warning(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> str | None:
+    """A sentence when the ROI cuts off most of the scene (more than CUT_WARN_FRACTION), else None."""
+    frac, n = cut_fraction(points, lo, hi)
+    if n < 100 or frac <= CUT_WARN_FRACTION:
+        return None
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    S = scene_points(points)
+    z = np.percentile(S[:, 2], [5, 95])
+    return (f"the ROI (min {np.round(lo, 3).tolist()}, max {np.round(hi, 3).tolist()} m, ground plane at "
+            f"z = {hi[2]:.2f} m) leaves out {100 * frac:.0f} % of the measured scene (which lies at z = "
+            f"{z[0]:.2f}-{z[1]:.2f} m): the registration covers only part of the plant. Set the rig's ROI "
+            "from a depth map of a plant recording (calibration wizard, page 7)")
+
+
+def fit_roi(points: np.ndarray, margin_m: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    """An ROI for a plant depth map ``points`` (..., 3): x and y span the 1st-99th percentiles of
+    every measured point (the whole view of the ground, so that leaves moving between
+    recordings stay inside), min z is the scene's 1st percentile minus ``margin_m``, max z (the
+    ground plane) lies GROUND_CLEARANCE_M in front of the far surface. Returns (lo (3,), hi (3,))."""
+    X = _finite(points)
+    if len(X) < 10:
+        raise ValueError("the depth map has fewer than 10 measured points")
+    S = scene_points(X)
+    lo_xy = np.percentile(X[:, :2], 1, axis=0) - margin_m
+    hi_xy = np.percentile(X[:, :2], 99, axis=0) + margin_m
+    z_far = float(np.percentile(X[:, 2], FAR_PERCENTILE))
+    z_min = float(np.percentile(S[:, 2] if len(S) else X[:, 2], 1)) - margin_m
+    z_max = z_far - GROUND_CLEARANCE_M if len(S) else float(np.percentile(X[:, 2], 99)) + margin_m
+    return np.array([lo_xy[0], lo_xy[1], max(z_min, 0.0)]), np.array([hi_xy[0], hi_xy[1], z_max])

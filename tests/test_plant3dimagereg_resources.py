@@ -1,0 +1,91 @@
+"""The shipped Plant3DImageReg resources (resources/plant3dimagereg): recordings, rigs, landmarks.
+
+File-format checks run everywhere; the checks that read the real images need the data set beside
+the project (``../shared/data/plant3dimagereg``) and say so when it is absent.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from plantreg_gui.core.landmarks import LandmarkSet
+from plantreg_gui.core.rig import Rig
+
+ROOT = Path(__file__).resolve().parents[1]
+RES = ROOT / "resources" / "plant3dimagereg"
+PLANTS = ["01grapevine", "02leopard_lily", "03areca_palm", "04philodendron", "05boston_fern", "06weeping_fig"]
+DATA = ROOT.parent / "shared" / "data" / "plant3dimagereg"
+needs_data = pytest.mark.skipif(not (DATA / "lidar_depthmap_np").is_dir(),
+                                reason=f"the Plant3DImageReg data set is not at {DATA}")
+
+
+@pytest.mark.parametrize("name", ["rig_nominal.json", "rig.json"])
+def test_rigs_load_with_the_three_cameras(name):
+    rig = Rig.load(RES / name)
+    assert rig.names == ["ir", "thermal", "hyperspectral"]
+    assert rig.depth_camera == "ir" and rig.depth_scale == 0.001
+    assert [rig.camera(n).shape for n in rig.names] == [(576, 640), (480, 640), (512, 512)]
+    assert rig.camera("thermal").extra["units"] == "degC"
+    # the ROI's max z is the ground plane: below the plants (>= 1.05 m seen) and above the tray's near side
+    assert 1.05 < rig.ground_z < 1.25
+
+
+def test_recordings_point_into_the_shared_data_set_with_relative_paths():
+    for p in PLANTS:
+        m = json.loads((RES / "recordings" / p / "recording.json").read_text())
+        paths = [m["depth"], *m["images"].values()]
+        assert set(m["images"]) == {"ir", "thermal", "hyperspectral"}
+        assert all(not Path(x).is_absolute() for x in paths)
+        assert m["images"]["thermal"].endswith(f"thermal_np_01/{p}.npy")  # degrees C, not the display PNG
+        resolved = [(RES / "recordings" / p / x).resolve() for x in paths]
+        assert all(r.is_relative_to(DATA.resolve()) for r in resolved)
+
+
+def test_landmarks_file_is_valid_for_the_rig():
+    rig = Rig.load(RES / "rig_nominal.json")
+    ls = LandmarkSet.load(RES / "landmarks.json", rig, check_recordings=True)
+    assert ls.count() >= 20
+    assert set(ls.camera_names) == {"thermal", "hyperspectral"}
+    assert all(k.startswith("recordings/") for k in ls.recordings)
+    assert all(lm.note for pts in ls.recordings.values() for lm in pts)
+
+
+def test_landmarks_agree_with_the_two_eye_readings():
+    """Every landmark comes from two readings that agree (tools/finalize.py) and lies a few pixels
+    inside the read feature (the inward step onto valid depth)."""
+    ann = json.loads((RES / "tools" / "annotations.json").read_text())
+    for items in ann.values():
+        for it in items:
+            step = np.linalg.norm(np.subtract(it["ir"], it["feature_ir"]))
+            assert step <= 10.5 and abs(step - it["inward_step_ir_px"]) < 0.6
+
+
+@needs_data
+def test_every_recording_loads_against_the_fitted_rig():
+    from plantreg_gui.core.recording import Recording
+
+    rig = Rig.load(RES / "rig.json")
+    for p in PLANTS:
+        rec = Recording.load(RES / "recordings" / p, rig)
+        assert rec.images["thermal"].dtype == np.float64 and 10 < np.nanmedian(rec.images["thermal"]) < 30
+
+
+@needs_data
+def test_landmarks_sit_on_valid_plant_depth_and_the_fitted_rig_explains_the_hyperspectral_ones():
+    from plantreg_gui.core.rigfit import evaluate_landmarks, landmark_depth, load_recording_landmarks
+
+    rig = Rig.load(RES / "rig.json")
+    recs = load_recording_landmarks(rig, LandmarkSet.load(RES / "landmarks.json", rig))
+    for r in recs:
+        for lm in r.points:
+            z, why = landmark_depth(r.depth_m, lm.depth_uv)
+            assert np.isfinite(z) and 0.3 < z < 1.15, (r.name, lm.note, why)
+    rows, rejected = evaluate_landmarks(rig, recs, ["hyperspectral"])
+    assert not rejected
+    res = np.array([d["residual_px"] for d in rows])
+    # measured: median 2.6 px, max 4.8 px (README); reading uncertainty ~1 px per reading
+    assert len(res) >= 15 and np.median(res) < 3.5 and res.max() < 8.0
