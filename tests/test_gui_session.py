@@ -334,3 +334,27 @@ def test_colour_bars_give_the_limits_in_units(registered_workspace, qtbot):
     np.testing.assert_allclose(bar.limits, display.auto_limits(r.registered["thermal"], (5, 95)))
     assert w.sbs_grid.views["rgb"].bar.isHidden()  # a colour image has no colour bar
     assert not w.raw_grid.views["thermal"].bar.isHidden()
+
+
+@pytest.mark.gui
+def test_mixed_edge_pixels_are_a_mask_layer(registered_workspace):
+    """The result's mixed-pixel flags (per source) are offered in the masks view and drawn where
+    they are; a source without them offers nothing extra."""
+    w = registered_workspace
+    r = w.result
+    src = next((n for n, m in (getattr(r, "mixed", None) or {}).items() if m is not None and m.any()), None)
+    if src is None:
+        pytest.skip("this registration flags no mixed pixels (core without mixed-pixel flags)")
+    w.session.set_masks_source(src)
+    names = [n for n, _m, _what in w.session.mask_layers()]
+    assert "mixed edge pixels" in names
+    mv = w.masks_view
+    w.set_view("masks")
+    mv.show_cases.setChecked(False)
+    mv.show_areas.setChecked(False)
+    mv.opacity.setValue(100)
+    cb, mask = mv.extra["mixed edge pixels"]
+    np.testing.assert_array_equal(mask, r.mixed[src])
+    cb.setChecked(True)
+    shown = mv.view.displayed()
+    assert np.all(shown[r.mixed[src]] == (255, 40, 40))

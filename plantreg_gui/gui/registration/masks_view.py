@@ -18,6 +18,10 @@ from .image_views import ImageView
 from .model import case_table
 
 
+#: overlay colours of the other masks: red mixed edge pixels, blue flying pixels
+EXTRA_COLOURS = {"mixed edge pixels": (255, 40, 40), "flying pixels removed": (60, 120, 255)}
+
+
 class Legend(QTableWidget):
     """Rows: [x] colour  name | count | %. Unchecking a row hides that code's overlay."""
 
@@ -108,6 +112,10 @@ class MasksView(QWidget):
         l2 = QVBoxLayout(g2)
         l2.addWidget(self.show_areas)
         l2.addWidget(self.area_legend)
+        self.extra_box = QGroupBox("Other masks")
+        self.extra_layout = QVBoxLayout(self.extra_box)
+        self.extra: dict[str, tuple[QCheckBox, np.ndarray]] = {}
+        self.extra_box.hide()
         self.note = QLabel("Rows without a colour have no overlay (P1, P6), as in the paper. P2: occluded in the "
                            "source; P3.1/P3.2: the depth camera cannot see there; %: of all target pixels.")
         self.note.setWordWrap(True)
@@ -118,6 +126,7 @@ class MasksView(QWidget):
         sl.addLayout(form)
         sl.addWidget(g1)
         sl.addWidget(g2)
+        sl.addWidget(self.extra_box)
         sl.addWidget(self.note)
         sl.addStretch(1)
         side.setMinimumWidth(330)
@@ -207,6 +216,8 @@ class MasksView(QWidget):
 
         session.events.result.connect(refresh)
         session.events.masks_source.connect(source)
+        session.events.masks_source.connect(lambda: self.set_extra_masks(session.mask_layers()))
+        session.events.result.connect(lambda: self.set_extra_masks(session.mask_layers()))
         session.events.display.connect(lambda _name: self.update_view())
         self.hovered.connect(lambda _src, r, c: session.hover("target", r, c))
         return self
@@ -226,7 +237,26 @@ class MasksView(QWidget):
         if self.show_cases.isChecked() and src in self.cases:
             on = self.case_legend.enabled_codes()
             out = display.overlay(out, self.cases[src], {c: v for c, v in display.CASE_COLOURS.items() if c in on}, op)
+        for name, (cb, mask) in self.extra.items():
+            if cb.isChecked() and mask.shape == out.shape[:2]:
+                out = display.overlay(out, mask.astype(np.uint8), {1: EXTRA_COLOURS.get(name, (255, 0, 0))}, op)
         return out
+
+    def set_extra_masks(self, masks: list[tuple[str, np.ndarray, str]]) -> None:
+        """Boolean masks offered as overlays (mixed edge pixels, flying pixels), with their meaning."""
+        keep = {n for n, (cb, _m) in self.extra.items() if cb.isChecked()}
+        for cb, _m in self.extra.values():
+            self.extra_layout.removeWidget(cb)
+            cb.deleteLater()
+        self.extra = {}
+        for name, mask, what in masks:
+            cb = QCheckBox(f"{name} ({int(mask.sum()):,})")
+            cb.setToolTip(what)
+            cb.setChecked(name in keep)
+            cb.toggled.connect(self.update_view)
+            self.extra_layout.addWidget(cb)
+            self.extra[name] = (cb, mask)
+        self.extra_box.setVisible(bool(masks))
 
     def update_view(self) -> None:
         if not self.isVisible():  # composed when shown (showEvent): hidden tabs cost nothing

@@ -470,6 +470,24 @@ class RegistrationSession:
     def summary_html(self) -> str:
         return self.summary
 
+    def mask_layers(self) -> list[tuple[str, np.ndarray, str]]:
+        """Extra boolean masks of the result in the target grid, when it has them: (name, (H, W)
+        bool, what it means) - the masks source's mixed edge pixels, and the flying pixels the
+        depth filter removed (when the target is the depth camera, whose grid they are in)."""
+        r = self.result
+        if r is None:
+            return []
+        out = []
+        mixed = (getattr(r, "mixed", None) or {}).get(self.masks_source)
+        if mixed is not None and mixed.shape == r.shape:
+            out.append(("mixed edge pixels", np.asarray(mixed, bool),
+                        f"P1 pixels whose footprint in {self.masks_source} reaches across a silhouette"))
+        flying = getattr(r, "flying", None)
+        if flying is not None and flying.shape == r.shape:
+            out.append(("flying pixels removed", np.asarray(flying, bool),
+                        "depth pixels between two surfaces, removed before meshing"))
+        return out
+
     def colour_bar(self, L: Layer) -> tuple[str | None, tuple[float, float] | None, str]:
         """(colour map, (lo, hi) limits in the layer's unit, unit) of a single-band layer as drawn;
         (None, None, '') for colour and multi-band images (no colour bar)."""

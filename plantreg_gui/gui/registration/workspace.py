@@ -292,6 +292,12 @@ class RegistrationWorkspace(QWidget):
         self.controls.set_layers(s.layers or s.raw)
         if ok:
             self.controls.layer.setCurrentText(r.target)
+            warnings = list(getattr(r, "warnings", []) or [])
+            if warnings:  # e.g. the ROI cuts off most of the measured depth (core/roi.py)
+                self.banner.setText(" ".join(warnings))
+                self.banner.show()
+            elif s.plant is None and s.rig is not None:
+                self.banner.hide()
             if not self._view_chosen:
                 self.tabs.setCurrentWidget(self.views["side-by-side"])
         self._update_empty_notes()
