@@ -329,12 +329,13 @@ def test_export_dialog_needs_a_folder_and_a_part(qapp, tmp_path):
     nothing ticked would write an empty folder: Export stays disabled until both are given."""
     from PySide6.QtWidgets import QDialogButtonBox
 
-    from plantreg_gui.gui.registration.export_dialog import PARTS, ExportDialog
+    from plantreg_gui.core.export import OUTPUTS
+    from plantreg_gui.gui.registration.export_dialog import ExportDialog
 
     dlg = ExportDialog(tmp_path / "out")
     ok = dlg.buttons.button(QDialogButtonBox.StandardButton.Ok)
     try:
-        assert ok.isEnabled() and dlg.what() == list(PARTS)
+        assert ok.isEnabled() and dlg.what() == list(OUTPUTS)  # every core output is offered
         dlg.folder.setText("   ")
         assert not ok.isEnabled()
         dlg.folder.setText(str(tmp_path / "out2"))
