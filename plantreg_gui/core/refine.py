@@ -89,10 +89,11 @@ class RefineParams:
     restarts: int = 2                   # Powell restarts when it runs out of evaluations
     #: converged only if the chance NID minus the result's NID is at least this
     min_information: float = 0.01
-    #: ... and moving the image by ``probe_px`` either way in x and y raises the NID by at least this
-    #: fraction of that information (measured on the demo: 0.03 thermal, whose image is smooth, to 0.2)
+    #: ... and moving the image by max(``probe_px``, 1 % of its diagonal) either way in x and y raises
+    #: the NID by at least this fraction of that information
     min_contrast: float = 0.01
-    probe_px: float = 3.0
+    probe_px: float = 3.0               # at least this, or probe_frac of the image diagonal
+    probe_frac: float = 0.01
     #: landmark disagreement (median px) above which a warning is given
     landmark_warn_px: float = 3.0
     #: ... and if the landmarks agreed better with the start pose, keep the start pose
@@ -628,7 +629,9 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
     nid_c, tot_c = _nid_per_recording(lv, cam, shuffled)
     chance_cost = float(np.dot(tot_c, nid_c) / tot_c.sum())
     information = chance_cost - end_cost
-    probe = _Param(cam, p.probe_px, par.zm, False)
+    # the probe scales with the image (a smooth thermal image changes little over 3 px)
+    probe_px = max(p.probe_px, p.probe_frac * float(np.hypot(cam.width, cam.height)))
+    probe = _Param(cam, probe_px, par.zm, False)
     shifted = [_cost(lv, probe.camera(np.eye(6)[k] * sgn))[0] for k in (0, 1) for sgn in (-1, 1)]
     contrast = (min(shifted) - end_cost) / max(information, 1e-3)
     converged = bool(res.success) and not on_bound and information >= p.min_information and contrast >= p.min_contrast
@@ -641,7 +644,7 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
         if information < p.min_information:
             why.append(f"the images share almost no information (NID {end_cost:.3f} vs chance {chance_cost:.3f})")
         elif contrast < p.min_contrast:
-            why.append(f"the cost has no clear minimum (moving {p.probe_px:g} px changes it by only "
+            why.append(f"the cost has no clear minimum (moving {probe_px:.0f} px changes it by only "
                        f"{contrast * 100:.0f} % of the information)")
         warn.append(f"{name}: did not converge ({'; '.join(why)}); keep the start pose or check the images")
     dR = cam.R_cam_rig @ cam0.R_cam_rig.T
