@@ -75,7 +75,7 @@ class RefineParams:
     levels_deg: tuple[float, ...] = (1.6, 0.8, 0.4, 0.2, 0.0)
     min_sigma_px: float = 0.8
     bins: int = 24                      # histogram bins per axis
-    max_points: int = 6000             # per recording at the finest level
+    max_points: int = 15000            # per recording at the finest level (6000 was measured too few for thermal)
     min_points: int = 3000              # per recording at the coarsest level
     candidates: int = 8                 # depth points considered per recording, in multiples of max_points
     bound_units: float = 5.0            # search box per level, +- blur widths
