@@ -55,7 +55,7 @@ from .errors import InputError
 from .progress import Reporter, ensure_reporter
 from .raycast import pixel_rays_cam, project_points
 from .recording import Recording
-from .register import Meshes, RegistrationParams, build_meshes, transport_pixels
+from .register import Meshes, RegistrationParams, build_meshes, filter_depth, transport_pixels
 from .rig import Rig
 
 #: what ``free`` may contain (other names are accepted by the caller's landmark fit, not here)
@@ -291,7 +291,11 @@ class _Level:
 def _prepare_recording(rig: Rig, rec: Recording, rays_cam: np.ndarray, p: RefineParams,
                        rng: np.random.Generator) -> _RecData:
     dcam = rig.depth()
-    depth = rec.depth_m(rig.depth_scale)
+    depth_raw = rec.depth_m(rig.depth_scale)
+    rp = RegistrationParams(occlusion_tol_m=p.occlusion_tol_m)
+    # the registration's ToF clean-up (flying pixels, same-surface denoising): points on the
+    # surfaces the meshes are built from, so that a point does not hide behind its own surface
+    depth, _flying = filter_depth(depth_raw, rp)
     H, W = depth.shape
     # mixed pixels: a large depth range in the 3x3 neighbourhood (or a neighbour without depth)
     big = np.where(np.isfinite(depth), depth, np.float32(np.inf))
@@ -309,8 +313,7 @@ def _prepare_recording(rig: Rig, rec: Recording, rays_cam: np.ndarray, p: Refine
         ref = _single_channel(rec.images[rig.depth_camera])
     else:
         ref = np.nan_to_num(depth, nan=float(np.nanmax(depth)) if np.isfinite(depth).any() else 0.0)
-    rp = RegistrationParams(occlusion_tol_m=p.occlusion_tol_m)
-    meshes = build_meshes(rig, depth, rp, rays_cam=rays_cam)
+    meshes = build_meshes(rig, depth_raw, rp, rays_cam=rays_cam)
     return _RecData(X_rig, pix, ref, meshes)
 
 
