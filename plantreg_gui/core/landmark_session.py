@@ -320,6 +320,13 @@ class LandmarkSession:
         rows, _rej = evaluate_landmarks(self.rig, self._recording_landmarks([self.recording_key]), [camera])
         return {d["index"]: d["residual_px"] for d in rows}
 
+    def summary(self) -> dict[str, dict[str, Any]]:
+        """Per camera over every recording: ``n``, ``median_px``, ``p90_px``, ``max_px`` of the current rig."""
+        from .rigfit import _stats_by
+
+        rows, _ = evaluate_landmarks(self.rig, self._recording_landmarks())
+        return _stats_by(rows, ("camera",)) if rows else {}
+
     def predicted(self, index: int, camera: str | None = None) -> np.ndarray | None:
         """Where the current rig puts point ``index``'s depth pixel in ``camera`` (2,), or None."""
         from .rigfit import landmark_depth
