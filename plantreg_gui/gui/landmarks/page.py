@@ -365,6 +365,7 @@ class LandmarkPage(QWidget):
 
     def _selection_changed(self) -> None:
         s = self.session
+        self.right.grab_markers = s.pending is None
         self.left.set_markers(self.left.markers, s.selected, s.pending)
         self.right.set_markers(self.right.markers, s.selected)
         self.over.set_markers(self.over.markers, s.selected)

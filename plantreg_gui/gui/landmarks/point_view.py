@@ -45,6 +45,8 @@ class PointView(ImageView):
         self._press = None
         self._drag: int | None = None
         self._moved = False
+        #: False while a click here completes a pair: then a click near a marker adds, not grabs
+        self.grab_markers = True
 
     def set_markers(self, markers: list[Marker], selected: int | None, pending: np.ndarray | None = None) -> None:
         self.markers, self.selected, self.pending = markers, selected, pending
@@ -68,7 +70,7 @@ class PointView(ImageView):
         if e.button() == Qt.MouseButton.LeftButton and self.array is not None:
             pos = e.position().toPoint()
             self._press, self._moved = pos, False
-            hit = self._marker_at(pos)
+            hit = self._marker_at(pos) if self.grab_markers else None
             if hit is not None:
                 self._drag = hit
                 self.setDragMode(QGraphicsView.DragMode.NoDrag)
