@@ -17,12 +17,12 @@ SHARED = Path(os.environ.get("PLANTREG_SHARED_DATA", Path(__file__).resolve().pa
 
 @pytest.fixture(scope="session")
 def demo_dir(tmp_path_factory) -> Path:
-    """A demo folder as `plantreg demo` writes it (rig.json, recording/, ground_truth/, calibration/).
-    Tests must not modify it."""
+    """A demo folder as `plantreg demo --clean` writes it (rig.json, recording/, ground_truth/,
+    calibration/): the ideal recording, so accuracy figures keep their meaning. Tests must not modify it."""
     from plantreg_gui.core.synthetic import write_demo
 
     folder = tmp_path_factory.mktemp("demo") / "demo"
-    write_demo(folder)
+    write_demo(folder, clean=True)
     return folder
 
 

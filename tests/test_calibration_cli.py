@@ -7,6 +7,7 @@ fx ~= 535.9 px; the set's README names pair 02 the weak view.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 
 import cv2
@@ -131,7 +132,7 @@ def test_unreadable_image(shared_data, tmp_path, capsys):
     s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04"])
     (s / "pose_03" / "right.jpg").write_bytes(b"not a jpeg")
     err = _run_fails(s, tmp_path, capsys)
-    assert "pose_03/right.jpg" in err and "not a readable image" in err
+    assert "pose_03/right.jpg" in err and "not a JPEG file" in err
 
 
 def test_bad_exclude_and_roi(shared_data, tmp_path, capsys):
@@ -158,7 +159,7 @@ def test_outputs_never_overwrite_the_session(shared_data, tmp_path, capsys):
     for out, rep in ((s / "session.json", tmp_path / "r.json"), (tmp_path / "rig.json", s / "pose_01" / "left.jpg")):
         code = main(["calibrate", str(s), "--out", str(out), "--report", str(rep), "--quiet"])
         err = capsys.readouterr().err
-        assert code == 1 and "would overwrite a file of the session" in err and "Traceback" not in err
+        assert code == 1 and "would replace an input" in err and "Traceback" not in err
     assert ((s / "session.json").read_bytes(), (s / "pose_01" / "left.jpg").read_bytes()) == before
     assert not (tmp_path / "rig.json").exists() and not (tmp_path / "r.json").exists()
 
@@ -172,10 +173,16 @@ def test_failed_rig_write_leaves_no_report_and_no_traceback(shared_data, tmp_pat
     out = tmp_path / "out"
     out.mkdir()
 
-    def full(self, path):
-        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+    from plantreg_gui.core import imageio
 
-    monkeypatch.setattr(Rig, "save", full)
+    real_replace = os.replace
+
+    def full(src, dst):  # the rig's move into place fails (as a full disk or a lost mount would)
+        if str(dst) == str(out / "rig.json"):
+            raise OSError(errno.ENOSPC, "No space left on device", str(src))
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(imageio.os, "replace", full)
     code = main(["calibrate", str(s), "--out", str(out / "rig.json"), "--report", str(out / "r.json"), "--quiet"])
     err = capsys.readouterr().err
     assert code == 1 and "Traceback" not in err and len(err.strip().splitlines()) == 1

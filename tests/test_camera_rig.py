@@ -72,7 +72,7 @@ def test_rig_roundtrip_keeps_unknown_keys(tmp_path):
     (lambda d: d.update(version="one"), "version must be"),
     (lambda d: d["cameras"][0].update(dist=[float("nan"), 0, 0, 0, 0]), "finite"),
     (lambda d: d["cameras"][0].update(t=[0, float("inf"), 0]), "finite"),
-    (lambda d: d["cameras"][0].update(width=10.5), "whole numbers"),
+    (lambda d: d["cameras"][0].update(width=10.5), "cameras[0].width must be a positive integer, got 10.5"),
     (lambda d: d.update(roi={"min": [0, 0, float("nan")], "max": [1, 1, 1]}), "roi"),
 ])
 def test_bad_rig_files_name_the_file(tmp_path, mutate, words):

@@ -86,7 +86,7 @@ def _no_depth_camera(root, rig, rec):
 
 def _unreadable_image(root, rig, rec):
     (rec / "rgb.png").write_bytes(b"this is not a png at all")
-    return rig, rec, "ir", rec / "rgb.png", ["read"]
+    return rig, rec, "ir", rec / "rgb.png", ["not a PNG file"]
 
 
 def _depth_wrong_size(root, rig, rec):
@@ -201,10 +201,10 @@ def test_os_error_while_writing_is_one_line(tmp_path, capsys, monkeypatch):
     rig, rec = _write_inputs(tmp_path)
     monkeypatch.setattr(register_mod, "Registrar", _FakeRegistrar)
 
-    def full(path, img):
+    def full(path, *args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
 
-    monkeypatch.setattr(export, "write_tiff", full)
+    monkeypatch.setattr(export, "write_tiff_tiled", full)  # the registered TIFFs
     out = tmp_path / "out"
     code = cli.main(_args(rig, rec, out))
     err = capsys.readouterr().err
@@ -340,7 +340,7 @@ def _run_main(argv):
 def demo(tmp_path_factory):
     from plantreg_gui.core.synthetic import write_demo
 
-    return write_demo(tmp_path_factory.mktemp("demo") / "demo")
+    return write_demo(tmp_path_factory.mktemp("demo") / "demo", clean=True)
 
 
 @pytest.fixture(scope="module")

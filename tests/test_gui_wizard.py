@@ -174,10 +174,12 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
         # per-view cells (defect 9): px and normalised shown, coloured by the normalised one, legend
         from plantreg_gui.gui.calibration.widgets import grade_colour
 
-        cell = dp.views.item(0, 1)
-        px, nn = (float(x.split()[0]) for x in cell.text().split("\n"))
-        assert cell.text().endswith("norm.") and px > 0 and nn > 0
-        assert cell.background().color() == grade_colour(nn)
+        cells = [dp.views.item(i, j) for i in range(dp.views.rowCount()) for j in range(1, dp.views.columnCount())]
+        cells = [c for c in cells if c is not None and c.text().endswith("norm.")]
+        assert cells
+        for cell in cells:
+            px, nn = (float(x.split()[0]) for x in cell.text().split("\n"))
+            assert px > 0 and nn > 0 and cell.background().color() == grade_colour(nn)
         assert dp.views_legend.isVisible() and "normalised" in dp.views_legend.text()
 
         # --- page 7: ROI, save; the files against the truth

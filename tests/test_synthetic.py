@@ -261,7 +261,7 @@ def test_texture_shows_a_one_pixel_shift(rig, rec, materials):
 # ---------------------------------------------------------------------- writing
 def test_write_demo_writes_a_loadable_demo(tmp_path, rig, rec, gt):
     out = tmp_path / "demo"
-    paths = write_demo(out, calibration=False, supersample=1)
+    paths = write_demo(out, calibration=False, supersample=1, clean=True)
     assert paths["rig"] == out / "rig.json"
     r = Rig.load(out / "rig.json")
     loaded = Recording.load(out / "recording", r)

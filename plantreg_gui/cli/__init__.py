@@ -6,8 +6,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
+import os
+import signal
 import sys
 import time
+from pathlib import Path
 
 from .. import __version__
 from ..core.errors import Cancelled, PlantregError
@@ -33,6 +37,69 @@ class StderrProgress:
         print(f"[{100 * fraction:3.0f}%] {message}", file=sys.stderr, flush=True)
 
 
+# ---------------------------------------------------------------------- argument types
+# argparse prints "plantreg register: error: argument --seed: ..." and exits 2 for these.
+def nonempty_path(text: str) -> Path:
+    """A path argument; "" (an unset shell variable) would silently mean the current folder."""
+    if text == "":
+        raise argparse.ArgumentTypeError("must not be empty (an unset shell variable?)")
+    return Path(text)
+
+
+def finite_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got '{text}'")
+    return v
+
+
+def positive_float(text: str) -> float:
+    v = finite_float(text)
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got '{text}'")
+    return v
+
+
+def nonneg_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+    if v < 0 or v >= 2**63:
+        raise argparse.ArgumentTypeError(f"must be a whole number from 0 to 2**63 - 1, got '{text}'")
+    return v
+
+
+class Terminated(BaseException):
+    """SIGTERM or SIGHUP arrived: unwinds like Ctrl-C, so every temporary output is removed."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_terminated(signum, frame) -> None:
+    raise Terminated(signum)
+
+
+def _install_signal_handlers() -> dict:
+    """SIGTERM (``timeout``, ``kill``, a batch system) and SIGHUP (a closed terminal) clean up
+    like SIGINT. Only from the main thread (signal handlers cannot be set elsewhere)."""
+    import threading
+
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            try:
+                old[sig] = signal.signal(sig, _raise_terminated)
+            except (OSError, ValueError):  # pragma: no cover - platform without the signal
+                pass
+    return old
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="plantreg", description="Multimodal 3D image registration for plant phenotyping")
     p.add_argument("--version", action="version", version=f"plantreg {__version__}")
@@ -48,8 +115,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     # the words of this command line, for provenance (sys.argv is someone else's when called in-process)
     args.argv = list(sys.argv[1:] if argv is None else argv)
+    old_handlers = _install_signal_handlers()
     try:
         return int(args.run(args) or 0)
+    except Terminated as e:
+        print(f"plantreg: terminated by {signal.Signals(e.signum).name}; temporary outputs removed", file=sys.stderr)
+        return 128 + e.signum
     except Cancelled:
         print("plantreg: cancelled", file=sys.stderr)
         return 130
@@ -57,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         print("plantreg: interrupted", file=sys.stderr)
         return 130
     except PlantregError as e:
-        print(f"plantreg: error: {e}", file=sys.stderr)
+        print(f"plantreg: error: {' '.join(str(e).split(chr(10)))}", file=sys.stderr)
         return 1
     except MemoryError:
         print("plantreg: error: out of memory", file=sys.stderr)
@@ -66,6 +137,16 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{e.filename}: " if e.filename else ""
         print(f"plantreg: error: {where}{e.strerror or e}", file=sys.stderr)
         return 1
+    except Exception as e:
+        if type(e).__module__.startswith("cv2"):  # an OpenCV refusal we did not foresee: one line, not a page
+            from ..core.errors import one_line
+
+            print(f"plantreg: error: OpenCV: {one_line(str(e))}", file=sys.stderr)
+            return 1
+        raise
+    finally:
+        for sig, h in old_handlers.items():
+            signal.signal(sig, h)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -23,6 +23,7 @@ from ..core.errors import InputError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from . import finite_float, nonempty_path
     from .register_cmd import add_output_options
 
     p = sub.add_parser(
@@ -33,15 +34,15 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     )
     p.add_argument("recordings", nargs="+", metavar="RECORDING",
                    help="recording folder, or a text/CSV file listing one recording folder per line")
-    p.add_argument("--rig", required=True, type=Path, metavar="RIG", help="rig file (plantreg.rig JSON)")
+    p.add_argument("--rig", required=True, type=nonempty_path, metavar="RIG", help="rig file (plantreg.rig JSON)")
     p.add_argument("--target", required=True, metavar="NAME", help="name of the target camera")
-    p.add_argument("--out", required=True, type=Path, metavar="OUT", help="output folder (one sub-folder per recording)")
+    p.add_argument("--out", required=True, type=nonempty_path, metavar="OUT", help="output folder (one sub-folder per recording)")
     p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="local worker processes (default: the number of cores)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on a Dask distributed cluster (e.g. tcp://host:8786) instead of local processes; "
                    "the workers must see the same file system")
-    p.add_argument("--edge-angle", type=float, default=None, metavar="DEG",
+    p.add_argument("--edge-angle", type=finite_float, default=None, metavar="DEG",
                    help="mesh edge-cut angle in degrees (default 15, as in the paper)")
     add_output_options(p)
     p.add_argument("--overwrite", action="store_true",

@@ -2,17 +2,22 @@
 
     plantreg calibrate SESSION --out RIG --report REPORT
                        [--roi XMIN YMIN ZMIN XMAX YMAX ZMAX] [--exclude POSE:CAM ...]
-                       [--detector auto|classic] [--quiet]
+                       [--detector auto|classic] [--max-rms PX] [--overwrite] [--quiet]
 
 Detects the board in every image, calibrates every camera and the rig jointly, computes the
 paper's three error tables and writes the rig file (with provenance under ``"calibration"``),
 the report JSON and its tables as CSV beside it (``REPORT_STEM_<table>.csv``). Progress on
 stderr, a summary on stdout. Session format and tables: ``docs/calibration.md``.
+
+The rig, the report and its CSVs are written as one transaction (all or nothing; the previous
+set survives any failure); existing files are replaced only with ``--overwrite``. A calibration
+that clearly failed (RMS error above ``--max-rms``, default 2 px) writes nothing and exits 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import sys
 from pathlib import Path
@@ -30,11 +35,13 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "board pose) and write the rig file, an error report (intrinsic, extrinsic and depth tables) and "
         "the tables as CSV.",
     )
-    p.add_argument("session", type=Path, metavar="SESSION", help="capture session folder (with session.json)")
-    p.add_argument("--out", required=True, type=Path, metavar="RIG", help="rig file to write (JSON)")
-    p.add_argument("--report", required=True, type=Path, metavar="REPORT",
+    from . import finite_float, nonempty_path, positive_float
+
+    p.add_argument("session", type=nonempty_path, metavar="SESSION", help="capture session folder (with session.json)")
+    p.add_argument("--out", required=True, type=nonempty_path, metavar="RIG", help="rig file to write (JSON)")
+    p.add_argument("--report", required=True, type=nonempty_path, metavar="REPORT",
                    help="report JSON to write; the tables go beside it as REPORT_STEM_<table>.csv")
-    p.add_argument("--roi", type=float, nargs=6, default=None, metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
+    p.add_argument("--roi", type=finite_float, nargs=6, default=None, metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
                    help="region of interest in the rig frame (metres), stored in the rig file and used to mesh "
                         "the session's depth maps for the depth table (default: a box around the board per pose)")
     p.add_argument("--exclude", nargs="+", default=[], metavar="POSE:CAM",
@@ -42,6 +49,12 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--detector", choices=("auto", "classic"), default="auto",
                    help="chessboard corner detector: 'auto' (findChessboardCornersSB, default) or 'classic' "
                         "(findChessboardCorners + cornerSubPix 11x11, as OpenCV's stereo_calib sample; for comparison)")
+    p.add_argument("--max-rms", type=positive_float, default=None, metavar="PX",
+                   help="largest RMS reprojection error (px; joint and per camera) a successful calibration may "
+                        "have (default 2); above it nothing is written and the exit status is 1")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing rig file, report and CSV tables (replaced together, only when the new "
+                        "set is complete)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(run=run)
     return p
@@ -65,17 +78,13 @@ def _parse_excludes(items: list[str], session) -> set[tuple[str, str]]:
     return out
 
 
-def _check_output(path: Path, what: str) -> None:
-    if path.exists() and path.is_dir():
-        raise InputError(f"{what} path is a folder, expected a file name", path)
-    if not path.parent.is_dir():
-        raise InputError(f"folder of the {what} does not exist", path.parent)
-
-
 def run(args: argparse.Namespace) -> int:
     from .. import cli
     from ..core.calibration import Session
-    from ..core.calibration.report import calibrated_rig, run_session, write_report
+    from ..core.calibration.calibrate import MAX_RMS_PX, quality_problems
+    from ..core.calibration.metrics import empty_depth_maps
+    from ..core.calibration.report import calibrated_rig, report_files, run_session, write_calibration
+    from ..core.imageio import check_output_location
     from ..core.progress import Reporter
 
     session = Session.load(args.session)
@@ -86,15 +95,22 @@ def run(args: argparse.Namespace) -> int:
         if not np.all(lo < hi):
             raise InputError("--roi: XMIN YMIN ZMIN must be below XMAX YMAX ZMAX")
         roi = (lo, hi)
-    _check_output(args.out, "rig file")
-    _check_output(args.report, "report")
-    if args.out.resolve() == args.report.resolve():
-        raise InputError("--out and --report must be different files", args.out)
-    inputs = {session.path.resolve()} | {f.resolve() for pose in session.poses
-                                         for f in [*pose.images.values(), *([pose.depth] if pose.depth else [])]}
-    for path, what in ((args.out, "--out"), (args.report, "--report")):
-        if path.resolve() in inputs:
-            raise InputError(f"{what} would overwrite a file of the session; choose another file name", path)
+    # every output, checked before the long work: free (or --overwrite), writable, no input among
+    # them, and no two of them the same file (--out X/r_intrinsic.csv --report X/r.json)
+    inputs = [session.folder, session.path] + [f for pose in session.poses
+                                               for f in [*pose.images.values(), *([pose.depth] if pose.depth else [])]]
+    outputs = {args.out.absolute(): "--out"}
+    for f in report_files(args.report):
+        if f.absolute() in outputs:
+            raise InputError(f"--out and --report would write the same file ({f}); choose other names", args.out)
+        outputs[f.absolute()] = "--report" if f == args.report else f"--report's table {f.name}"
+    for f, what in outputs.items():
+        if f == args.report.absolute() or f == args.out.absolute() or os.path.lexists(f):
+            check_output_location(f, what, overwrite=args.overwrite, inputs=inputs)
+    empty, every = empty_depth_maps(session)
+    if every and len(empty) == len(every):
+        raise InputError(f"none of the session's {len(every)} depth maps has a valid pixel (all 0 or NaN), e.g. "
+                         f"{empty[0]}; fix the depth export, or remove \"depth\" from session.json", session.path)
 
     options = None
     if args.detector != "auto":
@@ -108,20 +124,21 @@ def run(args: argparse.Namespace) -> int:
                 options[(pose.name, cam)] = DetectOptions(o.invert, o.enhance, args.detector)
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
     detections, cal, report = run_session(session, excluded, options, roi, progress)
+    _print_summary(session, detections, cal, report)
+    for w in report.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    max_rms = MAX_RMS_PX if args.max_rms is None else args.max_rms
+    problems = quality_problems(cal, max_rms)
+    if problems:
+        raise InputError(f"calibration failed, nothing written: {'; '.join(problems)}. Check the board's columns "
+                         f"and rows (inner corners: {session.board.columns}x{session.board.rows} now) and square size, "
+                         "and the weak views above; --max-rms PX accepts larger errors", session.path)
     words = getattr(args, "argv", None)
     command = "plantreg " + " ".join(shlex.quote(str(a)) for a in words) if words else None
     rig = calibrated_rig(cal, session, report, roi, command, excluded)
-    # everything is computed: now write (each file atomically; the rig last)
-    written: list[Path] = []
-    try:
-        written = write_report(report, args.report)
-        rig.save(args.out)
-    except BaseException:
-        for p in written:  # a report without its rig (disk full, Ctrl-C) must not look complete
-            p.unlink(missing_ok=True)
-        raise
+    # everything is computed: now write the rig, the report and its tables as one transaction
+    written = write_calibration(rig, args.out, report, args.report)
 
-    _print_summary(session, detections, cal, report)
     if roi is None and rig.depth_camera is not None:
         # a calibration cannot know where the ground is; registration meshes everything above it
         lo, hi = rig.roi_min, rig.roi_max
@@ -131,7 +148,8 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
     print(f"wrote {args.out}")
     for p in written:
-        print(f"wrote {p}")
+        if p != args.out:
+            print(f"wrote {p}")
     return 0
 
 

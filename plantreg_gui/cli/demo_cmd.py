@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -19,11 +20,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "hyperspectral), a recording of a plant with overlapping curved leaves, the true registration of every "
         "infrared pixel (ground_truth/ir.npz) and a synthetic calibration session.",
     )
-    p.add_argument("dir", type=Path, metavar="DIR", help="output folder (must not exist or be empty, unless --overwrite)")
+    from . import nonempty_path, nonneg_int
+
+    p.add_argument("dir", type=nonempty_path, metavar="DIR", help="output folder (must not exist or be empty, unless --overwrite)")
     p.add_argument("--size", choices=("demo", "paper"), default="demo",
                    help="'demo': RGB 1280x720, hyperspectral 256x256x100; 'paper': RGB 3840x2160, "
                         "hyperspectral 512x512x204 (as in the paper's benchmark)")
-    p.add_argument("--seed", type=int, default=0, help="plant and noise seed (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="plant and noise seed (default 0)")
+    p.add_argument("--clean", action="store_true",
+                   help="ideal recording: exact depth (1 mm steps) and sharp images; by default the depth has "
+                        "time-of-flight artefacts (flying pixels, holes, 1 mm + 0.1 %% noise) and the thermal "
+                        "camera an optical blur")
     p.add_argument("--overwrite", action="store_true", help="replace DIR if it exists and is not empty")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(run=run)
@@ -32,13 +39,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..core.synthetic import write_demo
 
+    from ..core.imageio import check_output_location
+
     d = args.dir
-    if d.exists() and (not d.is_dir() or any(d.iterdir())) and not args.overwrite:
-        what = "is not a folder" if not d.is_dir() else "exists and is not empty"
-        raise InputError(f"{what}; choose another folder, or pass --overwrite to replace it", d)
+    if os.path.lexists(d) and not d.is_dir():  # --overwrite replaces folders, never a file
+        raise InputError("exists and is not a folder; choose another folder name", d)
+    check_output_location(d, "demo folder", folder=True, overwrite=args.overwrite)
     t0 = time.perf_counter()
     paths = write_demo(args.dir, size=args.size, seed=args.seed, progress=StderrProgress(args.quiet),
-                       overwrite=args.overwrite)
+                       overwrite=args.overwrite, clean=args.clean)
     print(f"wrote the synthetic demo to {d} in {time.perf_counter() - t0:.1f} s:")
     for name, p in paths.items():
         print(f"  {name:13s} {p}")

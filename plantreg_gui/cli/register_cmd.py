@@ -2,6 +2,8 @@
 
     plantreg register --rig RIG --recording DIR --target NAME --out OUT
                       [--edge-angle DEG] [--outputs PARTS] [--tiff-codec C] [--overwrite] [--quiet]
+                      [--no-flying-filter | --remove-flying] [--flying-jump REL]
+                      [--no-denoise] [--denoise-size N] [--mixed-radius PX] [--drop-mixed]
 
 Writes the output folder described in ``docs/outputs.md`` (see :mod:`plantreg_gui.core.export`)
 and prints, per source camera, the share of target pixels in each projection case.
@@ -28,13 +30,31 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "(3D: depth mesh + ray casting) and write registered images, case maps, a point cloud "
         "and a summary into OUT.",
     )
-    p.add_argument("--rig", required=True, type=Path, metavar="RIG", help="rig file (plantreg.rig JSON)")
-    p.add_argument("--recording", required=True, type=Path, metavar="DIR",
+    from . import finite_float, nonempty_path
+
+    p.add_argument("--rig", required=True, type=nonempty_path, metavar="RIG", help="rig file (plantreg.rig JSON)")
+    p.add_argument("--recording", required=True, type=nonempty_path, metavar="DIR",
                    help="recording folder (with recording.json)")
     p.add_argument("--target", required=True, metavar="NAME", help="name of the target camera")
-    p.add_argument("--out", required=True, type=Path, metavar="OUT", help="output folder (must not exist or be empty)")
-    p.add_argument("--edge-angle", type=float, default=None, metavar="DEG",
+    p.add_argument("--out", required=True, type=nonempty_path, metavar="OUT", help="output folder (must not exist or be empty)")
+    p.add_argument("--edge-angle", type=finite_float, default=None, metavar="DEG",
                    help="mesh edge-cut angle in degrees (default 15, as in the paper)")
+    tof = p.add_argument_group("time-of-flight depth clean-up and mixed pixels (docs/registration.md)")
+    fly = tof.add_mutually_exclusive_group()
+    fly.add_argument("--no-flying-filter", action="store_true",
+                     help="keep flying pixels (depths between two surfaces) as measured")
+    fly.add_argument("--remove-flying", action="store_true",
+                     help="remove flying pixels instead of moving them onto the surface they mostly saw")
+    tof.add_argument("--flying-jump", type=finite_float, default=None, metavar="REL",
+                     help="a depth jump between neighbours counts above REL x depth (default 0.01: 1 cm at 1 m)")
+    tof.add_argument("--no-denoise", action="store_true", help="no edge-preserving depth denoising")
+    tof.add_argument("--denoise-size", type=int, default=None, metavar="N",
+                     help="window of the same-surface plane fit, depth pixels, odd (default 3)")
+    tof.add_argument("--mixed-radius", type=finite_float, default=None, metavar="PX",
+                     help="mixed-pixel flag: source pixels around a silhouette, before adding 2 x the "
+                          "camera's blur_px (default 1)")
+    tof.add_argument("--drop-mixed", action="store_true",
+                     help="write NaN instead of the registered value where a pixel is flagged mixed")
     add_output_options(p)
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -55,6 +75,7 @@ def add_output_options(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from .. import cli
     from ..core.export import check_output_spares_inputs, parse_outputs, write_outputs
+    from ..core.imageio import check_output_location
     from ..core.recording import Recording
     from ..core.register import AREA_P4, AREA_P5, AREA_P6, Registrar, RegistrationParams
     from ..core.rig import Rig
@@ -75,21 +96,17 @@ def run(args: argparse.Namespace) -> int:
         if not 0.0 < args.edge_angle < 90.0:
             raise InputError(f"--edge-angle must be between 0 and 90 degrees, got {args.edge_angle:g}")
         params.edge_angle_deg = float(args.edge_angle)
-    # fail before the long work, not after it
+    _tof_params(args, params)
+    # fail before the long work, not after it: the output location (free or --overwrite, not an
+    # input, writable), then the recording (names, then every image's header and size)
     check_output_spares_inputs(out, [rig_path, args.recording])
-    if out.exists() and not out.is_dir():
-        raise InputError("output path exists and is not a folder", out)
-    parent = out.absolute().parent
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        raise InputError("output folder cannot be made: this is a file, not a folder", parent)
-    if out.is_dir() and any(out.iterdir()) and not args.overwrite:
-        raise InputError("output folder exists and is not empty (choose another, or pass --overwrite)", out)
+    check_output_location(out, "output", folder=True, overwrite=args.overwrite, inputs=[rig_path, args.recording])
     recording = Recording.load(args.recording, rig)
 
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
     result = Registrar(rig, recording, params).register(args.target, progress.sub(0.0, 0.85))
+    if args.drop_mixed:
+        drop_mixed(result)
     write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0), what=what,
                   tiff_codec=args.tiff_codec,
                   inputs={"rig": rig_path.resolve(), "recording": Path(args.recording).resolve(),
@@ -108,7 +125,51 @@ def run(args: argparse.Namespace) -> int:
     print("  target areas: " + "  ".join(
         f"{name} {100.0 * float(np.count_nonzero(a == code)) / n:5.1f}%" for code, name in
         ((AREA_P4, "P4"), (AREA_P5, "P5"), (AREA_P6, "P6"))))
+    if result.flying is not None:
+        how = "off" if not params.flying_filter else ("repaired" if params.flying_repair else "removed")
+        print(f"  depth: {int(np.count_nonzero(result.flying))} flying pixels ({how})"
+              + ("; mixed (% of P1): " + "  ".join(
+                  f"{cam} {100.0 * np.count_nonzero(m) / max(1, np.count_nonzero(result.cases[cam] == 1)):.1f}%"
+                  for cam, m in result.mixed.items()) if result.mixed else ""))
     return 0
+
+
+def _tof_params(args: argparse.Namespace, params) -> None:
+    """The ToF options into ``params`` (InputError for values out of range)."""
+    if args.no_flying_filter:
+        params.flying_filter = False
+    if args.remove_flying:
+        params.flying_repair = False
+    if args.flying_jump is not None:
+        if not 0.0 < args.flying_jump < 1.0:
+            raise InputError(f"--flying-jump must be between 0 and 1 (a fraction of the depth), got {args.flying_jump:g}")
+        params.flying_jump_rel = float(args.flying_jump)
+    if args.no_denoise:
+        params.denoise = False
+    if args.denoise_size is not None:
+        if args.denoise_size < 3 or args.denoise_size > 15 or args.denoise_size % 2 == 0:
+            raise InputError(f"--denoise-size must be an odd number from 3 to 15, got {args.denoise_size}")
+        params.denoise_size = int(args.denoise_size)
+    if args.mixed_radius is not None:
+        if not 0.0 <= args.mixed_radius <= 50.0:
+            raise InputError(f"--mixed-radius must be between 0 and 50 source pixels, got {args.mixed_radius:g}")
+        params.mixed_radius_px = float(args.mixed_radius)
+
+
+def drop_mixed(result) -> None:
+    """NaN for the registered values of pixels flagged mixed (per source), in place (plain arrays
+    and :class:`~plantreg_gui.core.hits.HitImage` alike)."""
+    from ..core.hits import HitImage
+
+    for cam, m in result.mixed.items():
+        if cam not in result.registered or not np.any(m):
+            continue
+        img = result.registered[cam]
+        flagged = np.asarray(m, dtype=bool)
+        if isinstance(img, HitImage):
+            img.values[flagged.reshape(-1)[img.index]] = np.nan
+        else:
+            img[flagged] = np.nan
 
 
 _SHORT = {0: "P6", 1: "P1", 2: "P2", 3: "P3.1", 4: "P3.2", 5: "P5", 6: "outside"}
@@ -119,6 +180,12 @@ def _command_line(args: argparse.Namespace) -> str:
              "--target", args.target, "--out", str(args.out)]
     if args.edge_angle is not None:
         parts += ["--edge-angle", f"{args.edge_angle:g}"]
+    for flag in ("no_flying_filter", "remove_flying", "no_denoise", "drop_mixed"):
+        if getattr(args, flag, False):
+            parts.append("--" + flag.replace("_", "-"))
+    for opt in ("flying_jump", "denoise_size", "mixed_radius"):
+        if getattr(args, opt, None) is not None:
+            parts += ["--" + opt.replace("_", "-"), f"{getattr(args, opt):g}"]
     if args.outputs is not None:
         parts += ["--outputs", args.outputs]
     if args.tiff_codec != "deflate-fp":

@@ -151,34 +151,28 @@ class Camera:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "Camera":
-        """Build from a rig-file entry; raises ``ValueError`` with a readable message."""
+    def from_dict(cls, d: dict[str, Any], key: str = "camera") -> "Camera":
+        """Build from a rig-file entry; raises ``ValueError`` with a readable message that starts
+        with ``key`` (the entry's place in the file, e.g. ``cameras[2]``). Types and the physical
+        sanity bounds are checked by :mod:`.validate` (documented there and in docs/errors.md)."""
+        from . import validate as v
+
+        if not isinstance(d, dict):
+            raise ValueError(f"{key} must be an object {{\"name\": ..., \"width\": ...}}, got {v.show(d)}")
         missing = [k for k in ("name", "width", "height", "K") if k not in d]
         if missing:
-            raise ValueError(f"camera entry lacks {', '.join(missing)}")
-        name = str(d["name"])
-        try:
-            K = np.asarray(d["K"], dtype=np.float64)
-            dist = np.asarray(d.get("dist", [0, 0, 0, 0, 0]), dtype=np.float64).ravel()
-            R = np.asarray(d.get("R", np.eye(3)), dtype=np.float64)
-            t = np.asarray(d.get("t", [0, 0, 0]), dtype=np.float64).ravel()
-            width, height = int(d["width"]), int(d["height"])
-        except (TypeError, ValueError) as e:
-            raise ValueError(f"camera '{name}': non-numeric value ({e})") from None
-        if width != float(d["width"]) or height != float(d["height"]):  # int() would silently truncate 639.5
-            raise ValueError(f"camera '{name}': width and height must be whole numbers of pixels")
-        if not (np.all(np.isfinite(dist)) and np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
-            raise ValueError(f"camera '{name}': dist, R and t must be finite numbers (no NaN or infinity)")
-        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise ValueError(f"camera '{name}': K must be a 3x3 matrix with positive focal lengths")
-        if dist.size not in (0, 4, 5, 8, 12, 14):
-            raise ValueError(f"camera '{name}': dist has {dist.size} coefficients (OpenCV takes 4, 5, 8, 12 or 14)")
-        if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-5) or np.linalg.det(R) < 0:
-            raise ValueError(f"camera '{name}': R is not a rotation matrix")
-        if t.shape != (3,):
-            raise ValueError(f"camera '{name}': t must have 3 elements")
-        if width <= 0 or height <= 0:
-            raise ValueError(f"camera '{name}': width and height must be positive")
-        extra = {k: v for k, v in d.items() if k not in cls._KNOWN}
-        return cls(name, str(d.get("modality", "unknown")), width, height, K,
-                   dist if dist.size else np.zeros(5), R, t, extra)
+            raise ValueError(f"{key} lacks {', '.join(missing)}")
+        name = v.camera_name(d["name"], f"{key}.name")
+        modality = v.string(d.get("modality", "unknown"), f"{key}.modality")
+        width = v.positive_int(d["width"], f"{key}.width", v.MAX_SIDE)
+        height = v.positive_int(d["height"], f"{key}.height", v.MAX_SIDE)
+        K = v.number_array(d["K"], f"{key}.K", (3, 3), " (3 x 3 camera matrix)")
+        dist = v.number_array(d.get("dist", [0, 0, 0, 0, 0]), f"{key}.dist").ravel()
+        R = v.number_array(d.get("R", np.eye(3).tolist()), f"{key}.R", (3, 3), " (3 x 3 rotation)")
+        t = v.number_array(d.get("t", [0, 0, 0]), f"{key}.t", (3,), " (metres)")
+        v.check_intrinsics(K, width, height, key)
+        v.check_distortion(dist, K, width, height, key)
+        v.check_rotation(R, key)
+        v.check_translation(t, key)
+        extra = {k: val for k, val in d.items() if k not in cls._KNOWN}
+        return cls(name, modality, width, height, K, dist if dist.size else np.zeros(5), R, t, extra)

@@ -22,6 +22,7 @@ class InputError(PlantregError):
 
     def __init__(self, message: str, path: str | Path | None = None):
         self.path = Path(path) if path is not None else None
+        message = one_line(message)  # the promise is one line, whatever a library said
         self.detail = message
         super().__init__(f"{self.path}: {message}" if self.path is not None else message)
 
@@ -31,3 +32,13 @@ class Cancelled(PlantregError):
 
     def __init__(self, message: str = "cancelled by the user"):
         super().__init__(message)
+
+
+def one_line(text: str) -> str:
+    """A library's message as one line: OpenCV's ``OpenCV(4.x) /path/file.cpp:123: error: (-215:...)
+    ... in function 'f'`` loses its source location, and line breaks become ``; ``."""
+    import re
+
+    text = re.sub(r"OpenCV\([^)]*\)\s*\S+:\d+:\s*error:\s*", "", str(text))
+    parts = [p.strip() for p in str(text).splitlines() if p.strip()]
+    return "; ".join(parts)

@@ -5,6 +5,8 @@ OUT/registered/<camera>.tif   float32, target H x W (x bands), NaN where not map
                               deflate + floating-point predictor (imageio.TIFF_CODECS)
 OUT/registered/<camera>.png   display preview (colour map / PCA false colour, contrast stretched)
 OUT/cases/<camera>.png        uint8 case code per target pixel, every source camera
+OUT/cases/<camera>_edge.png   uint8 255 = P1 pixel flagged mixed (footprint across a silhouette), else 0
+OUT/flying.png                uint8 255 = depth pixel detected as flying (depth camera's grid), else 0
 OUT/areas.png                 uint8 area code per target pixel (4 = P4, 5 = P5, 6 = P6)
 OUT/pointcloud.ply            object-mesh hits (rig frame) with every camera's values + RGB colour
 OUT/mosaic.png                tiles alternating the modalities' previews
@@ -40,11 +42,11 @@ from .register import AREA_NAMES, CASE_NAMES, RegistrationResult
 from .rig import Rig
 
 SUMMARY_FORMAT = "plantreg.summary"
-SUMMARY_VERSION = 1
+SUMMARY_VERSION = 2  # 2: "tof" (flying pixels, mixed-pixel flags), parameters of the depth clean-up
 
 #: Selectable parts of the output (``what``): float TIFFs, display PNGs, case maps, area map,
 #: point cloud, mosaic, summary.
-OUTPUTS = ("registered", "previews", "cases", "areas", "pointcloud", "mosaic", "summary")
+OUTPUTS = ("registered", "previews", "cases", "edges", "areas", "pointcloud", "mosaic", "summary")
 
 #: Other names accepted by :func:`parse_outputs` (the command line says ``ply``).
 OUTPUT_ALIASES = {"ply": "pointcloud"}
@@ -61,7 +63,7 @@ def parse_outputs(text: str | Iterable[str] | None) -> tuple[str, ...]:
     parts = {OUTPUT_ALIASES.get(w, w) for w in words}
     unknown = sorted(w for w in words if OUTPUT_ALIASES.get(w, w) not in OUTPUTS)
     if unknown or not parts:
-        choices = ",".join(["registered", "cases", "areas", "ply", "previews", "mosaic", "summary"])
+        choices = ",".join(["registered", "cases", "edges", "areas", "ply", "previews", "mosaic", "summary"])
         raise InputError(f"--outputs: unknown part(s) {', '.join(unknown) or '(none given)'}; choose from {choices} or all")
     return tuple(o for o in OUTPUTS if o in parts)
 
@@ -123,6 +125,8 @@ def write_outputs(
         steps += [(f"previews:{c}", 1.0 + 0.01 * _bands(result.registered[c])) for c in cams]
     if "cases" in sel:
         steps += [(f"cases:{c}", 0.3) for c in result.cases]
+    if "edges" in sel:
+        steps += edge_steps(result)
     if "areas" in sel:
         steps.append(("areas", 0.3))
     if "pointcloud" in sel:
@@ -156,6 +160,8 @@ def write_outputs(
             elif kind == "cases":
                 rel = f"cases/{_safe(cam)}.png"
                 write_png(tmp / rel, np.asarray(result.cases[cam], dtype=np.uint8))
+            elif kind in ("edges", "flying"):
+                rel = write_edge_step(tmp, result, kind, cam)
             elif kind == "areas":
                 rel = "areas.png"
                 write_png(tmp / rel, np.asarray(result.area, dtype=np.uint8))
@@ -195,6 +201,44 @@ def check_output_spares_inputs(out: str | Path, inputs: Iterable[str | Path]) ->
                              "outside the recording and the rig file's folder", out)
 
 
+# ---------------------------------------------------------------------- mixed-pixel and flying-pixel masks
+def edge_steps(result: RegistrationResult) -> list[tuple[str, float]]:
+    """Export steps of the ToF masks: ``edges:<cam>`` per source with a mixed flag, ``flying``."""
+    steps = [(f"edges:{c}", 0.3) for c in result.mixed]
+    if result.flying is not None:
+        steps.append(("flying", 0.2))
+    return steps
+
+
+def write_edge_step(folder: Path, result: RegistrationResult, kind: str, cam: str) -> str:
+    """Write ``cases/<cam>_edge.png`` (kind ``edges``) or ``flying.png`` into ``folder``; returns
+    the relative path. Masks are uint8, 255 = flagged, so any viewer shows them."""
+    if kind == "edges":
+        rel = f"cases/{_safe(cam)}_edge.png"
+        mask = np.asarray(result.mixed[cam], dtype=bool)
+    else:
+        rel = "flying.png"
+        mask = np.asarray(result.flying, dtype=bool)
+    write_png(folder / rel, np.where(mask, 255, 0).astype(np.uint8))
+    return rel
+
+
+def tof_summary(result: RegistrationResult) -> dict[str, Any]:
+    """The ``tof`` block of ``summary.json``: flying-pixel count, per-source mixed-pixel counts."""
+    fly = result.flying
+    n_depth = int(np.asarray(fly).size) if fly is not None else 0
+    n_fly = int(np.count_nonzero(fly)) if fly is not None else 0
+    mixed = {}
+    for cam, m in result.mixed.items():
+        n_p1 = int(np.count_nonzero(np.asarray(result.cases[cam]) == 1)) if cam in result.cases else 0
+        n_m = int(np.count_nonzero(m))
+        mixed[cam] = {"pixels": n_m, "percent_of_p1": round(100.0 * n_m / n_p1, 3) if n_p1 else 0.0}
+    return {"flying_pixels": n_fly, "flying_percent_of_depth": round(100.0 * n_fly / n_depth, 4) if n_depth else 0.0,
+            "flying_handling": ("repaired" if getattr(result.params, "flying_repair", True) else "removed")
+            if getattr(result.params, "flying_filter", False) else "off",
+            "mixed": mixed}
+
+
 # ---------------------------------------------------------------------- registered images
 # ---------------------------------------------------------------------- point cloud
 def ply_property_names(result: RegistrationResult, cams: list[str] | None = None) -> dict[str, list[str]]:
@@ -221,7 +265,8 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
     Vertex properties: ``x, y, z`` float32 (rig frame, metres); ``red, green, blue`` uchar from
     ``colours_rgb8`` (H, W, 3) (a display rendering); ``row, col`` int32 (the target pixel);
     per camera its registered value(s) as float32 (NaN where that camera is not mapped); per
-    source camera ``<cam>_case`` uchar (the case code). Points with NaN coordinates are dropped.
+    source camera ``<cam>_case`` uchar (the case code) and ``<cam>_mixed`` uchar (1 = flagged mixed).
+    Points with NaN coordinates are dropped.
     """
     rep = ensure_reporter(progress)
     cams = list(result.registered) if cams is None else cams
@@ -246,6 +291,14 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
         used.add(p)
         case_props[cam] = p
         dtype.append((p, "u1"))
+    mixed_props: dict[str, str] = {}
+    for cam in getattr(result, "mixed", {}):
+        p = f"{_ply_name(cam)}_mixed"
+        while p in used:
+            p += "_"
+        used.add(p)
+        mixed_props[cam] = p
+        dtype.append((p, "u1"))
     dt = np.dtype(dtype)  # packed records, the PLY binary layout
     comment = (f"plantreg {__version__}: object-mesh hits of target '{result.target}' rays, "
                f"rig frame, metres; target image {W}x{H}")
@@ -262,14 +315,15 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
             for a in range(0, n, step):
                 rep(0.95 * a / max(n, 1), "point cloud")
                 f.write(_ply_records(result, cams, names, case_props, dt, colours_rgb8, pts, flat[a : a + step],
-                                     rows[a : a + step], cols[a : a + step]).data)
+                                     rows[a : a + step], cols[a : a + step], mixed_props).data)
     rep(1.0, "point cloud")
     return n
 
 
 def _ply_records(result: RegistrationResult, cams: list[str], names: dict[str, list[str]],
                  case_props: dict[str, str], dt: np.dtype, colours_rgb8: np.ndarray | None, pts: np.ndarray,
-                 flat: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+                 flat: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                 mixed_props: dict[str, str] | None = None) -> np.ndarray:
     """The packed PLY records (m, itemsize) uint8 of the hits at row-major pixel indices ``flat`` (m,)."""
     H, W = result.shape
     m = len(flat)
@@ -292,6 +346,8 @@ def _ply_records(result: RegistrationResult, cams: list[str], names: dict[str, l
         columns(names[cam][0], len(names[cam]), "<f4")[:] = _values_at(result.registered[cam], flat, H * W)
     for cam, p in case_props.items():
         v[p] = np.asarray(result.cases[cam], dtype=np.uint8).reshape(-1)[flat]
+    for cam, p in (mixed_props or {}).items():
+        v[p] = np.asarray(result.mixed[cam], dtype=np.uint8).reshape(-1)[flat]
     return raw
 
 
@@ -354,6 +410,7 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
         "warnings": list(getattr(result, "warnings", [])),
         "export_timings": dict(export_timings or {}),
         "stats": dict(result.stats),
+        "tof": tof_summary(result),
         "case_codes": {str(k): v for k, v in CASE_NAMES.items()},
         "area_codes": {str(k): v for k, v in AREA_NAMES.items()},
         "files": list(files or []),
@@ -467,8 +524,9 @@ def _colour_camera(result: RegistrationResult, rig: Rig) -> str | None:
 
 def _step_label(kind: str, cam: str) -> str:
     return {"registered": f"registered/{cam}.tif", "previews": f"registered/{cam}.png",
-            "cases": f"cases/{cam}.png"}.get(kind, {"areas": "areas.png", "pointcloud": "pointcloud.ply",
-                                                     "mosaic": "mosaic.png"}.get(kind, kind))
+            "cases": f"cases/{cam}.png", "edges": f"cases/{cam}_edge.png"}.get(
+        kind, {"areas": "areas.png", "pointcloud": "pointcloud.ply", "flying": "flying.png",
+               "mosaic": "mosaic.png"}.get(kind, kind))
 
 
 __all__ = ["OUTPUTS", "write_outputs", "write_ply", "build_summary", "ply_property_names"]

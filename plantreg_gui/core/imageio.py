@@ -3,13 +3,24 @@
 Readers keep values as they are: float thermal stays float, 16-bit stays 16-bit, a 204-band
 cube stays 204 bands. Arrays are (H, W) or (H, W, C), band-last. Colour images read with
 OpenCV are returned as RGB (not OpenCV's BGR).
+
+Hostile files are refused before anything large is allocated (``docs/errors.md``): every reader
+first checks that the path is a readable regular file, then reads the format's header and
+compares the size it claims with :data:`MAX_PIXELS`, :data:`MAX_BANDS`, :data:`MAX_IMAGE_BYTES`
+and, for uncompressed formats, with the file's size. Values must be real numbers (complex,
+structured and object arrays are refused with the reason). Truncated PNG/JPEG files are
+refused as such instead of being decoded with grey fill.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
+import signal
+import stat
 import tempfile
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -17,75 +28,302 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, one_line
 
 IMAGE_SUFFIXES = (".npy", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".hdr")
+
+#: Sanity bounds of an input image (documented in docs/errors.md). A 4K RGB image has 8.3 M
+#: pixels and the paper's hyperspectral cube 512 x 512 x 204 values; the bounds are far above
+#: any real camera and far below what a forged header can claim (terabytes).
+MAX_PIXELS = 1 << 28  # width x height (e.g. 16384 x 16384)
+MAX_SIDE = 1 << 16  # width or height
+MAX_BANDS = 4096
+MAX_IMAGE_BYTES = 1 << 32  # 4 GiB for the decoded array
+#: JSON inputs (rig, recording, session) are a few kB; anything much larger is not one of them.
+MAX_JSON_BYTES = 64 << 20
+
+#: dtype kinds an image may have: booleans, integers, floats (real numbers).
+_REAL_KINDS = "biuf"
+
+
+def check_input_file(path: str | Path, what: str = "file") -> Path:
+    """Raise :class:`InputError` naming ``path`` unless it is an existing, readable regular file.
+
+    A folder, FIFO, socket or device (``/dev/zero``) is refused as "not a regular file" (reading
+    a FIFO would block, a device never ends); a permission problem is named as such.
+    """
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise InputError(f"{what} is missing (not found)", path) from None
+    except PermissionError:
+        raise InputError(f"{what} cannot be reached (permission denied on a folder of its path)", path) from None
+    except OSError as e:
+        raise InputError(f"{what} cannot be read ({e.strerror or e})", path) from None
+    if stat.S_ISDIR(st.st_mode):
+        raise InputError(f"{what} is a folder, not a regular file", path)
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(st.st_mode) else "a device" if
+                (stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode)) else "a socket" if stat.S_ISSOCK(st.st_mode)
+                else "special")
+        raise InputError(f"{what} is {kind}, not a regular file", path)
+    try:
+        with open(path, "rb"):
+            pass
+    except PermissionError:
+        raise InputError(f"{what} is not readable (permission denied)", path) from None
+    except OSError as e:
+        raise InputError(f"{what} cannot be read ({e.strerror or e})", path) from None
+    return path
+
+
+def _check_array_header(path: Path, shape: tuple[int, ...], dtype: np.dtype, what: str = "header") -> None:
+    """Refuse a claimed array shape/dtype that is not a sane real-valued image (before reading it)."""
+    dtype = np.dtype(dtype)
+    if dtype.names is not None or dtype.kind == "V":
+        raise InputError(f"structured dtype {dtype} (fields {', '.join(dtype.names or ())}); an image holds "
+                         "plain numbers: save one field per file", path)
+    if dtype.kind == "c":
+        raise InputError(f"complex values (dtype {dtype}); plantreg reads real numbers: save the magnitude "
+                         "or the real part", path)
+    if dtype.kind not in _REAL_KINDS:
+        raise InputError(f"dtype {dtype} is not numeric (an image holds integers or floats)", path)
+    shape = tuple(int(s) for s in shape)
+    if len(shape) == 3 and shape[2] == 1:
+        shape = shape[:2]
+    if len(shape) not in (2, 3):
+        raise InputError(f"not an image: {what} claims shape {shape} (expected H x W or H x W x C)", path)
+    if min(shape) <= 0:
+        raise InputError(f"empty image: {what} claims shape {shape}", path)
+    h, w = shape[:2]
+    bands = shape[2] if len(shape) == 3 else 1
+    nbytes = h * w * bands * dtype.itemsize
+    if h > MAX_SIDE or w > MAX_SIDE or h * w > MAX_PIXELS or bands > MAX_BANDS or nbytes > MAX_IMAGE_BYTES:
+        raise InputError(
+            f"{what} claims {w} x {h} pixels x {bands} band(s) of {dtype} ({_human(nbytes)}), beyond plantreg's "
+            f"sanity bound ({MAX_SIDE} pixels a side, {MAX_PIXELS >> 20} M pixels, {MAX_BANDS} bands, "
+            f"{_human(MAX_IMAGE_BYTES)}); a corrupt or forged header?", path)
+
+
+def _check_data_size(path: Path, data_file: Path, offset: int, nbytes: int, what: str) -> None:
+    size = data_file.stat().st_size
+    if size < offset + nbytes:
+        where = "" if data_file == path else f" ({data_file.name})"
+        raise InputError(f"truncated: the {what} claims {_human(nbytes)} of pixel data but the file{where} holds "
+                         f"{_human(max(size - offset, 0))}", path)
+
+
+def _human(n: int) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1024
+    return str(n)  # pragma: no cover
+
+
+def _read_npy(path: Path) -> np.ndarray:
+    from numpy.lib import format as npf
+
+    with open(path, "rb") as f:
+        try:
+            version = npf.read_magic(f)
+            if version == (1, 0):
+                shape, _fortran, dtype = npf.read_array_header_1_0(f)
+            elif version == (2, 0):
+                shape, _fortran, dtype = npf.read_array_header_2_0(f)
+            elif version == (3, 0):  # 2.0 with a UTF-8 header; no public reader
+                impl = getattr(np.lib, "_format_impl", npf)
+                shape, _fortran, dtype = impl._read_array_header(f, version)
+            else:
+                raise ValueError(f"unsupported .npy format version {version[0]}.{version[1]}")
+        except ValueError as e:
+            raise InputError(f"not a valid .npy file ({one_line(str(e))})", path) from None
+        offset = f.tell()
+    if dtype.hasobject:
+        raise InputError(f"dtype {dtype} holds Python objects (pickles are never loaded); an image holds numbers",
+                         path)
+    _check_array_header(path, shape, dtype, "the .npy header")
+    _check_data_size(path, path, offset, int(np.prod(shape)) * dtype.itemsize, ".npy header")
+    return np.load(path, allow_pickle=False)
+
+
+def _read_png_jpeg(path: Path, suffix: str) -> np.ndarray:
+    from PIL import Image
+
+    with open(path, "rb") as f:
+        head = f.read(8)
+        f.seek(0, os.SEEK_END)
+        size = f.tell()
+        f.seek(max(size - 4096, 0))
+        tail = f.read()
+    is_png, is_jpeg = head.startswith(b"\x89PNG\r\n\x1a\n"), head.startswith(b"\xff\xd8")
+    if not (is_png or is_jpeg):
+        raise InputError(f"not a {'PNG' if suffix == '.png' else 'JPEG'} file (its first bytes are not the "
+                         "format's signature)", path)
+    kind = "PNG" if is_png else "JPEG"
+    # header only (Pillow reads it without decoding): refuse decompression bombs before decoding
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(path) as im:
+                w, h = im.size
+                bands = len(im.getbands())
+                bits = 16 if im.mode.startswith("I") else 8
+                if is_png:
+                    im.verify()  # chunk CRCs and structure, without decoding the pixels
+    except Image.DecompressionBombError as e:
+        raise InputError(f"{kind} header claims an image beyond plantreg's sanity bound ({one_line(str(e))})",
+                         path) from None
+    except (OSError, SyntaxError, ValueError) as e:
+        raise InputError(f"corrupt or truncated {kind} file ({one_line(str(e))})", path) from None
+    _check_array_header(path, (h, w, bands), np.uint16 if bits == 16 else np.uint8, f"the {kind} header")
+    # libjpeg decodes a truncated file with grey fill and only a warning: the end marker tells
+    if is_jpeg and b"\xff\xd9" not in tail:
+        raise InputError("corrupt or truncated JPEG file (no end-of-image marker)", path)
+    if is_png and b"IEND" not in tail[-12:]:
+        raise InputError("corrupt or truncated PNG file (no IEND chunk at its end)", path)
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise InputError(f"corrupt or truncated {kind} file (OpenCV cannot decode it)", path)
+    if img.ndim == 3 and img.shape[2] == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    elif img.ndim == 3 and img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGBA)
+    return img
+
+
+def _read_tiff(path: Path) -> np.ndarray:
+    import tifffile
+
+    with tifffile.TiffFile(path) as tf:
+        if not tf.series:
+            raise InputError("TIFF file holds no image", path)
+        series = tf.series[0]
+        shape, axes = tuple(series.shape), series.axes
+        # band-first planar cubes are moved band-last below: check the shape they will have
+        check = shape[1:] + shape[:1] if len(shape) == 3 and axes.endswith("SYX") else shape
+        _check_array_header(path, check, series.dtype, "the TIFF header")
+        pages = [p for p in series.pages if p is not None]
+        if pages and all(getattr(p, "compression", 1) == 1 for p in pages):
+            ends = [max((o + n for o, n in zip(p.dataoffsets, p.databytecounts)), default=0) for p in pages]
+            if ends and max(ends) > path.stat().st_size:
+                raise InputError("truncated TIFF file: its pixel data would end at byte "
+                                 f"{max(ends)} but the file has {path.stat().st_size} bytes", path)
+        img = series.asarray()
+    if img.ndim == 3 and axes.endswith("SYX"):
+        # planar-separate multi-band TIFF (GDAL's INTERLEAVE=BAND): tifffile gives bands
+        # first; plantreg's arrays are band-last
+        img = np.moveaxis(img, 0, -1)
+    return img
+
+
+def _read_envi(path: Path) -> np.ndarray:
+    import spectral.io.envi as envi
+
+    try:
+        h = envi.read_envi_header(str(path))
+        envi.check_compatibility(h)
+        p = envi.gen_params(h)
+    except Exception as e:  # spectral raises its own kinds for every header problem
+        raise InputError(f"not a valid ENVI header ({type(e).__name__}: {one_line(str(e))})", path) from None
+    inter = str(h.get("interleave", "bsq")).lower()
+    shape = (p.nrows, p.ncols, p.nbands)
+    _check_array_header(path, shape, np.dtype(p.dtype), "the ENVI header")
+    # the data file beside the header, found the way spectral does it; checked here so that a
+    # missing or unreadable one is named (spectral would leave a half-made object behind)
+    stem = path.with_suffix("")
+    exts = [""] + [e.lower() for e in envi.KNOWN_EXTS] + [inter]
+    exts += [e.upper() for e in exts if e]
+    data = next((Path(f"{stem}.{e}" if e else str(stem)) for e in exts
+                 if os.path.lexists(f"{stem}.{e}" if e else str(stem))), None)
+    if data is None:
+        raise InputError(f"ENVI data file not found beside the header ({stem.name}.img, .dat, .raw, ...)", path)
+    check_input_file(data, "ENVI data file")
+    _check_data_size(path, data, p.offset, p.nrows * p.ncols * p.nbands * np.dtype(p.dtype).itemsize,
+                     "ENVI header")
+    spy = envi.open(str(path), str(data))
+    try:
+        return np.asarray(spy.load())
+    finally:
+        del spy
 
 
 def read_image(path: str | Path) -> np.ndarray:
     """Read ``.npy``, ``.png``, ``.jpg``, ``.tif``/``.tiff`` or an ENVI ``.hdr`` cube.
 
-    Returns (H, W) or (H, W, C) in the file's dtype. Raises :class:`InputError` naming the
-    file when it is missing, unreadable or not an image.
+    Returns (H, W) or (H, W, C) in the file's dtype (real numbers). Raises :class:`InputError`
+    naming the file when it is missing, not a regular readable file, corrupt or truncated, not an
+    image, or claims a size beyond the sanity bounds (checked from the header, before reading).
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("file not found", path)
+    path = check_input_file(path, "image")
     suffix = path.suffix.lower()
     try:
         if suffix == ".npy":
-            img = np.load(path, allow_pickle=False)
+            img = _read_npy(path)
         elif suffix in (".png", ".jpg", ".jpeg"):
-            img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-            if img is None:
-                raise InputError("not a readable image", path)
-            if img.ndim == 3 and img.shape[2] == 3:
-                img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-            elif img.ndim == 3 and img.shape[2] == 4:
-                img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGBA)
+            img = _read_png_jpeg(path, suffix)
         elif suffix in (".tif", ".tiff"):
-            import tifffile
-
-            with tifffile.TiffFile(path) as tf:
-                series = tf.series[0]
-                img = series.asarray()
-                axes = series.axes
-            if img.ndim == 3 and axes.endswith("SYX"):
-                # planar-separate multi-band TIFF (GDAL's INTERLEAVE=BAND): tifffile gives bands
-                # first; plantreg's arrays are band-last
-                img = np.moveaxis(img, 0, -1)
+            img = _read_tiff(path)
         elif suffix == ".hdr":
-            import spectral.io.envi as envi
-
-            img = np.asarray(envi.open(str(path)).load())
+            img = _read_envi(path)
         else:
             raise InputError(
                 f"unsupported image type '{suffix}' (plantreg reads {', '.join(IMAGE_SUFFIXES)})", path
             )
     except InputError:
         raise
+    except MemoryError:
+        raise InputError("not enough memory to read this image", path) from None
+    except PermissionError:
+        raise InputError("image is not readable (permission denied)", path) from None
     except Exception as e:  # the libraries raise many kinds; the user needs the file and the reason
-        raise InputError(f"cannot read image ({type(e).__name__}: {e})", path) from None
+        raise InputError(f"cannot read image ({type(e).__name__}: {one_line(str(e))})", path) from None
     img = np.asarray(img)
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[:, :, 0]
     if img.ndim not in (2, 3) or img.size == 0:
         raise InputError(f"not an image: array of shape {img.shape} (expected H x W or H x W x C)", path)
+    _check_array_header(path, img.shape, img.dtype, "the file")
     return img
 
 
-def read_json(path: str | Path) -> object:
+def read_json(path: str | Path, what: str = "file") -> object:
     """Parse a JSON file; unreadable or malformed files raise :class:`InputError` naming the
-    file and, for syntax errors, the line and column."""
+    file and, for syntax errors, the line and column.
+
+    Refused before parsing: anything but a readable regular file, files over
+    :data:`MAX_JSON_BYTES`; while parsing: nesting deeper than Python's recursion limit.
+    """
     import json
 
-    path = Path(path)
+    path = check_input_file(path, what)
+    size = path.stat().st_size
+    if size > MAX_JSON_BYTES:
+        raise InputError(f"{_human(size)}, too large for a plantreg JSON file (limit {_human(MAX_JSON_BYTES)})", path)
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
         raise InputError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})", path) from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"cannot read ({e})", path) from None
+    except RecursionError:
+        raise InputError("JSON nested too deeply (a corrupt or hostile file?)", path) from None
+    except UnicodeDecodeError as e:
+        raise InputError(f"cannot read: not UTF-8 text ({e.reason} at byte {e.start})", path) from None
+    except OSError as e:
+        raise InputError(f"cannot read ({e.strerror or e})", path) from None
+
+
+def read_json_object(path: str | Path, what: str = "file") -> dict:
+    """:func:`read_json` for files whose top level must be a JSON object."""
+    d = read_json(path, what)
+    if not isinstance(d, dict):
+        raise InputError(f"the top level must be a JSON object {{...}}, got {_json_type(d)}", path)
+    return d
+
+
+def _json_type(v: object) -> str:
+    return {dict: "an object", list: "a list", str: "a string", bool: "true/false", type(None): "null",
+            int: "a number", float: "a number"}.get(type(v), type(v).__name__)
 
 
 # ---------------------------------------------------------------------- atomic writing
@@ -106,25 +344,63 @@ def _publish(tmp: Path, is_dir: bool = False) -> None:
     os.chmod(tmp, (0o777 if is_dir else 0o666) & ~_umask())
 
 
+def _renamed(e: OSError, tmp: Path, final: Path) -> OSError:
+    """``e`` with the temporary name in its file name replaced by the user's path: the user never
+    asked for ``.out.XXXX.part`` and must be told which of *their* files could not be written
+    (also when the error had no file name, as a full disk during ``write()``)."""
+    name = str(e.filename) if e.filename is not None else ""
+    t = str(tmp)
+    if name == t or name.startswith(t + os.sep):
+        name = str(final) + name[len(t):]
+    elif not name:
+        name = str(final)
+    else:
+        return e
+    new = OSError(e.errno, e.strerror or str(e), name)
+    return new
+
+
+@contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Hold SIGINT/SIGTERM/SIGHUP while a few renames move a complete result into place, so
+    that a signal never lands between moving the old result aside and the new one in."""
+    sigs = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+    import threading
+
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 @contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success move it into place, on error remove it.
 
     The temporary name is hidden and ends with the real suffix (``.name.XXXX.part.png``), so
     writers that choose the format by suffix (``cv2.imwrite``, ``tifffile``, ``np.save``) work
-    and nothing half-written ever carries the final name.
+    and nothing half-written ever carries the final name. OS errors (disk full, permission) name
+    ``path``, never the temporary name.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_s = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp_s)
+    tmp: Path | None = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_s = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
+        os.close(fd)
+        tmp = Path(tmp_s)
         yield tmp
         _publish(tmp)
         os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
+    except BaseException as e:
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)
+        if isinstance(e, OSError):
+            raise _renamed(e, tmp or path, path) from None
         raise
 
 
@@ -142,9 +418,11 @@ def write_png(path: str | Path, img: np.ndarray) -> None:
     img = np.asarray(img)
     if img.ndim == 3 and img.shape[2] == 3:
         img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".png", img)
+    if not ok:
+        raise OSError(errno.EINVAL, "PNG encoder failed", str(path))
     with atomic_path_suffixed(path) as tmp:
-        if not cv2.imwrite(str(tmp), img):
-            raise OSError(f"{path}: PNG encoder failed")
+        tmp.write_bytes(buf.tobytes())  # written by Python: a full disk is an OSError naming the file
 
 
 def write_tiff(path: str | Path, img: np.ndarray) -> None:
@@ -166,34 +444,168 @@ def write_tiff(path: str | Path, img: np.ndarray) -> None:
         tifffile.imwrite(tmp, a, **kw)
 
 
+# ---------------------------------------------------------------------- output locations
+def _nearest_existing(p: Path) -> Path:
+    p = p.absolute()
+    while not os.path.lexists(p) and p != p.parent:
+        p = p.parent
+    return p
+
+
+def check_output_location(out: str | Path, what: str = "output", *, folder: bool = False,
+                          overwrite: bool = False, inputs: Iterator[str | Path] | list = ()) -> Path:
+    """Validate an output path before any expensive work; raises :class:`InputError` naming it.
+
+    Refused: an empty path (an unset shell variable would otherwise mean the current folder);
+    a path that is, contains or lies inside one of ``inputs`` (files or folders); an existing
+    output unless ``overwrite`` (a non-empty folder when ``folder``, any file otherwise); a file
+    where a folder is wanted and vice versa; a mount point to be replaced; a location where no
+    file can be created (probed by creating and removing a hidden temporary file there, which
+    also catches read-only file systems and root-squashed mounts that permission bits do not show).
+    """
+    if str(out) == "":
+        raise InputError(f"{what} path is empty (an unset shell variable?)")
+    out = Path(out)
+    out_r = out.resolve()
+    for p in inputs:
+        p_r = Path(p).resolve()
+        if p_r == out_r or out_r in p_r.parents:
+            raise InputError(f"the {what} would replace an input ({p}); choose a location outside the inputs", out)
+    if os.path.lexists(out):
+        if out.is_symlink() and not out.exists():
+            pass  # a dangling link: replaced like a file (docs/errors.md)
+        elif folder and not out.is_dir():
+            raise InputError(f"{what} path exists and is not a folder", out)
+        elif not folder and out.is_dir():
+            raise InputError(f"{what} path is a folder, expected a file name", out)
+        elif folder and any(out.iterdir()) and not overwrite:
+            raise InputError(f"{what} folder exists and is not empty (choose another, or pass --overwrite)", out)
+        elif not folder and not overwrite:
+            raise InputError(f"{what} file exists (choose another name, or pass --overwrite to replace it)", out)
+        if overwrite and folder and out.is_dir() and not out.is_symlink() and os.path.ismount(out):
+            raise InputError(f"{what} folder is a mount point and cannot be replaced; choose a folder inside it", out)
+    base = _nearest_existing(out.parent)
+    if not base.is_dir():
+        raise InputError(f"{what} cannot be made: {base} is a file, not a folder", out)
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".plantreg-probe.", dir=base)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise InputError(f"{what} cannot be written: {base} is not writable ({e.strerror or e})", out) from None
+    return out
+
+
 @contextmanager
 def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path]:
     """Build an output folder under a temporary name and move it into place at the end.
 
     If ``out`` exists and is not empty it is an error unless ``overwrite`` (then the old folder
-    is replaced only after the new one is complete). A failed or cancelled run leaves nothing
-    at ``out`` that looks complete.
+    is replaced only after the new one is complete, and put back if the new one cannot be moved
+    in). A failed, cancelled or terminated run leaves nothing at ``out`` that looks complete and
+    no temporary folder beside it; OS errors name paths under ``out``, never the temporary name.
+    ``--overwrite`` onto a symbolic link replaces the link with a folder; its target is untouched.
     """
+    if str(out) == "":
+        raise InputError("output path is empty (an unset shell variable?)")
     out = Path(out)
-    if out.exists() and not out.is_dir():
+    if os.path.lexists(out) and not out.is_dir():
         raise InputError("output path exists and is not a folder", out)
     if out.is_dir() and any(out.iterdir()) and not overwrite:
         raise InputError("output folder exists and is not empty (choose another, or allow overwriting)", out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+    tmp: Path | None = None
+    old: Path | None = None
     try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
         yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        _publish(tmp, is_dir=True)
+        with _signals_deferred():
+            if os.path.lexists(out):
+                old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+                os.replace(out, old / "x")
+            try:
+                os.replace(tmp, out)
+            except BaseException:
+                if old is not None and os.path.lexists(old / "x") and not os.path.lexists(out):
+                    os.replace(old / "x", out)  # put the previous result back
+                raise
+            tmp = None
+            if old is not None:
+                shutil.rmtree(old, ignore_errors=True)
+                old = None
+    except BaseException as e:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+        if isinstance(e, OSError):
+            raise _renamed(e, tmp or out, out) from None
         raise
-    _publish(tmp, is_dir=True)
-    old = None
-    if out.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
-        os.replace(out, old / "x")
-    os.replace(tmp, out)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+
+
+@contextmanager
+def atomic_files(paths: list[str | Path], remove: list[str | Path] = ()) -> Iterator[dict[Path, Path]]:
+    """Write several files as one transaction: yields {final path: temporary path beside it}.
+
+    The caller writes every temporary file; when the block ends without error all of them are
+    moved into place together (signals held meanwhile), and the existing files in ``remove``
+    (stale members of a previous set) disappear with them. Existing files are moved aside first
+    and restored if any move fails, so the previous set survives any failure and the new set is
+    never half there. On error every temporary file is removed. OS errors name the final paths.
+    """
+    finals = [Path(p) for p in paths]
+    stale = [Path(p) for p in remove if os.path.lexists(p) and Path(p) not in finals]
+    if len({p.absolute() for p in finals}) != len(finals):
+        raise InputError("two outputs of this command would be the same file: "
+                         + ", ".join(sorted({str(p) for p in finals if finals.count(p) > 1})))
+    tmps: dict[Path, Path] = {}
+    moved: list[tuple[Path, Path]] = []  # (final, backup)
+    placed: list[Path] = []
+    current: Path | None = None
+    try:
+        for p in finals:
+            current = p
+            p.parent.mkdir(parents=True, exist_ok=True)
+            fd, t = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".part{p.suffix}", dir=p.parent)
+            os.close(fd)
+            tmps[p] = Path(t)
+        current = None
+        yield dict(tmps)
+        with _signals_deferred():
+            try:
+                for p in finals + stale:
+                    current = p
+                    if os.path.lexists(p):
+                        fd, b = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".old{p.suffix}", dir=p.parent)
+                        os.close(fd)
+                        os.replace(p, b)
+                        moved.append((p, Path(b)))
+                for p in finals:
+                    current = p
+                    _publish(tmps[p])
+                    os.replace(tmps[p], p)
+                    placed.append(p)
+                current = None
+            except BaseException:
+                for p in placed:
+                    Path(p).unlink(missing_ok=True)
+                for p, b in moved:
+                    os.replace(b, p)
+                moved = []
+                raise
+            for _p, b in moved:
+                b.unlink(missing_ok=True)
+    except BaseException as e:
+        for t in tmps.values():
+            t.unlink(missing_ok=True)
+        if isinstance(e, OSError):
+            for p, t in tmps.items():
+                if e.filename is not None and str(e.filename) == str(t):
+                    raise _renamed(e, t, p) from None
+            if e.filename is None:
+                raise _renamed(e, current or finals[0], current or finals[0]) from None
+        raise
 
 
 # ---------------------------------------------------------------------- compressed, tiled TIFF

@@ -220,7 +220,8 @@ SKIRT_MIN_JUMP_M = 0.01
 
 
 def extend_boundary(mesh: TriMesh, depth_cam: Camera, width_px: float = 0.5,
-                    depth_m: np.ndarray | None = None, min_jump_m: float = SKIRT_MIN_JUMP_M) -> TriMesh:
+                    depth_m: np.ndarray | None = None, min_jump_m: float = SKIRT_MIN_JUMP_M,
+                    flying: np.ndarray | None = None, depth_raw: np.ndarray | None = None) -> TriMesh:
     """Add a skirt of ``width_px`` depth pixels around the mesh's boundary, in the plane of each
     boundary vertex's depth.
 
@@ -238,6 +239,14 @@ def extend_boundary(mesh: TriMesh, depth_cam: Camera, width_px: float = 0.5,
     differs in depth by more than ``min_jump_m``. Holes that depth noise cuts into a smooth
     surface (small jumps) get none: a skirt there would stand out of the surface as a false
     occluder.
+
+    ``flying`` (H, W) bool: depth pixels removed as flying (their raw depths in ``depth_raw``).
+    A flying pixel straddles the edge, so the edge lies *inside* it: a boundary vertex whose
+    outward neighbour is flying gets, on top of ``width_px``, the share of that pixel's
+    footprint its own surface covers, estimated from the mixed depth as
+    ``1 - |z_fly - z_own| / |z_beyond - z_own|`` (``z_beyond``: the next pixel outwards; 0.5
+    when it has no usable depth). Without it, removing flying pixels would shrink every
+    silhouette by about half a pixel.
     """
     if mesh.n_triangles == 0 or width_px <= 0 or mesh.pixel is None:
         return mesh
@@ -274,7 +283,22 @@ def extend_boundary(mesh: TriMesh, depth_cam: Camera, width_px: float = 0.5,
         with np.errstate(invalid="ignore"):
             small_jump = measured & (np.abs(d[nflat] - d[mesh.pixel[ids]]) <= min_jump_m)
         ok &= ~small_jump
-    dist = np.where(ok, width_px / np.maximum(norm / 2, 0.5), 0.0)
+    width = np.full(len(ids), float(width_px))
+    if depth_m is not None and flying is not None and depth_raw is not None and flying.any():
+        fly = flying.reshape(-1)
+        toward = inside & fly[nflat]
+        if toward.any():
+            raw = np.asarray(depth_raw, dtype=np.float64).reshape(-1)
+            own = d[mesh.pixel[ids]]
+            nu2, nv2 = nu + step[:, 0], nv + step[:, 1]
+            in2 = toward & (nu2 >= 0) & (nu2 < W) & (nv2 >= 0) & (nv2 < H)
+            n2 = np.where(in2, nv2 * W + nu2, 0)
+            other = np.where(in2 & ~fly[n2], raw[n2], np.nan)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                share = 1.0 - np.abs(raw[nflat] - own) / np.abs(other - own)
+            share = np.where(np.isfinite(share), np.clip(share, 0.0, 1.0), 0.5)
+            width += np.where(toward, share, 0.0)
+    dist = np.where(ok, width / np.maximum(norm / 2, 0.5), 0.0)
     new_uv = pix[ids] + dirn * dist[:, None]
     X_top = mesh.vertices[ids].astype(np.float64)
     z = depth_cam.to_cam(X_top)[:, 2]

@@ -41,18 +41,34 @@ _child: dict[str, Any] = {}
 
 
 def _child_init(q, ev) -> None:
-    _child["queue"], _child["cancel"] = q, ev
+    import os
+
+    _child["queue"], _child["cancel"], _child["parent"] = q, ev, os.getppid()
 
 
 class _ChildToken(CancelToken):
-    def __init__(self, event) -> None:
+    """Cancelled when the parent sets the event, or when the parent process is gone (a killed
+    GUI must not leave its calculation running)."""
+
+    def __init__(self, event, parent: int) -> None:
         super().__init__()
         self._event = event  # a multiprocessing Event: set by the parent
+        self._parent = parent
+
+    @property
+    def cancelled(self) -> bool:
+        import os
+
+        return self._event.is_set() or os.getppid() != self._parent
+
+    def raise_if_cancelled(self) -> None:
+        if self.cancelled:
+            raise Cancelled()
 
 
 def _child_run(job: int, fn: Callable[..., Any], args: tuple, kwargs: dict) -> Any:
     q = _child["queue"]
-    rep = Reporter(lambda f, m: q.put((job, float(f), str(m))), _ChildToken(_child["cancel"]))
+    rep = Reporter(lambda f, m: q.put((job, float(f), str(m))), _ChildToken(_child["cancel"], _child["parent"]))
     return fn(*args, progress=rep, **kwargs)
 
 

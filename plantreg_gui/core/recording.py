@@ -7,6 +7,7 @@ paths relative to the folder. Images keep their values (see :mod:`.imageio`).
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -14,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .imageio import atomic_write_text, read_image, read_json
+from .imageio import atomic_write_text, check_input_file, read_image, read_json
 from .rig import Rig
 
 MANIFEST = "recording.json"
@@ -53,28 +54,24 @@ class Recording:
         manifest = folder / MANIFEST
         if not folder.is_dir():
             raise InputError("recording folder not found", folder)
-        if not manifest.is_file():
+        if not os.path.lexists(manifest):
             raise InputError(f"not a recording folder (no {MANIFEST})", folder)
-        m = read_json(manifest)
-        if not isinstance(m, dict) or not isinstance(m.get("images", {}), dict):
-            raise InputError("expected {\"depth\": FILE, \"images\": {CAMERA: FILE}}", manifest)
+        m = read_json(manifest, MANIFEST)
+        entries = _manifest_entries(m, manifest)
         paths: dict[str, Path] = {}
         images: dict[str, np.ndarray] = {}
-        for name, rel in m.get("images", {}).items():
-            p = folder / str(rel)
-            if p.is_dir():
-                raise InputError(f"image of camera '{name}' listed in {MANIFEST} is a folder, not a file", p)
-            if not p.is_file():
-                raise InputError(f"image of camera '{name}' listed in {MANIFEST} is missing", p)
-            images[str(name)] = read_image(p)
-            paths[str(name)] = p
+        for name, p in entries.items():  # names and paths checked before any image is read
+            if rig is not None and name is not None and name not in rig.names:
+                raise InputError(f"camera '{name}' of the recording is not in the rig ({', '.join(rig.names)})", p)
+            what = "depth map" if name is None else f"image of camera '{name}'"
+            check_input_file(p, f"{what} listed in {MANIFEST}")
+        for name, p in entries.items():
+            if name is not None:
+                images[name] = read_image(p)
+                paths[name] = p
         depth = None
-        if m.get("depth"):
-            p = folder / str(m["depth"])
-            if p.is_dir():
-                raise InputError(f"depth map listed in {MANIFEST} is a folder, not a file", p)
-            if not p.is_file():
-                raise InputError(f"depth map listed in {MANIFEST} is missing", p)
+        if None in entries:
+            p = entries[None]
             depth = read_image(p)
             paths["depth"] = p
             if depth.ndim != 2:
@@ -138,6 +135,36 @@ class Recording:
             m["depth_scale"] = self.depth_scale
         m.update(self.extra)
         atomic_write_text(folder / MANIFEST, json.dumps(m, indent=2) + "\n")
+
+
+def _manifest_entries(m: Any, manifest: Path) -> dict[str | None, Path]:
+    """Camera name (None for the depth map) -> path, from ``recording.json``'s content. Types and
+    names are checked here (a null or a number is named as such, not reported as a missing file
+    called "None"). Paths are relative to the folder; absolute ones and ones leading out of it
+    (``../x``) are accepted (docs/errors.md: a local tool reads what its user points it at)."""
+    from . import validate as v
+
+    if not isinstance(m, dict):
+        raise InputError("expected {\"depth\": FILE, \"images\": {CAMERA: FILE}} at the top level", manifest)
+    imgs = m.get("images", {})
+    if not isinstance(imgs, dict):
+        raise InputError(f"\"images\" must be an object {{CAMERA: FILE}}, got {v.show(imgs)}", manifest)
+    out: dict[str | None, Path] = {}
+    try:
+        for name, rel in imgs.items():
+            v.camera_name(name, "images key")
+            if not isinstance(rel, str) or not rel:
+                raise ValueError(f"images.{name} must be a file name (a non-empty string), got {v.show(rel)}")
+            out[name] = manifest.parent / rel
+        v.unique_names([n for n in out if n is not None], "images")
+        dep = m.get("depth")
+        if dep is not None and dep != "":  # null or "" = no depth map
+            if not isinstance(dep, str):
+                raise ValueError(f"depth must be a file name (a non-empty string) or null, got {v.show(dep)}")
+            out[None] = manifest.parent / dep
+    except ValueError as e:
+        raise InputError(str(e), manifest) from None
+    return out
 
 
 def _write_any(path: Path, img: np.ndarray) -> None:

@@ -68,6 +68,14 @@ class RegistrationParams:
     roi_max: np.ndarray | None = None
     uncertainty_tol_m: float = 0.002    # an uncertainty-mesh hit this much before the point counts (P3.1, P3.2)
     boundary_px: float = 0.5            # skirt around the object mesh's boundary, depth pixels (0 = none)
+    # ToF clean-up before meshing (core/depthfilter.py, docs/registration.md section 1a)
+    flying_filter: bool = True          # remove flying pixels (depth between two surfaces)
+    flying_jump_rel: float = 0.01       # a depth jump counts above this fraction of the depth (1 cm at 1 m)
+    flying_repair: bool = True          # move flying pixels onto the surface they mostly saw (False: remove)
+    denoise: bool = True                # edge-preserving same-surface plane fit
+    denoise_size: int = 3               # window of the plane fit, depth pixels (odd; 5 = smoother, 3x slower)
+    denoise_tol_rel: float = 0.01       # same surface: |dz| <= this fraction of the depth
+    mixed_radius_px: float = 1.0        # mixed-pixel flag: source px around a silhouette (+ 2 x camera blur_px)
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()}
@@ -100,6 +108,11 @@ class RegistrationResult:
     params: RegistrationParams
     timings: dict[str, float] = field(default_factory=dict)
     stats: dict[str, Any] = field(default_factory=dict)
+    #: (H_depth, W_depth) bool: depth pixels removed as flying before meshing (depth camera's grid)
+    flying: np.ndarray | None = None
+    #: source camera -> (H, W) bool: P1 pixels whose footprint in the source reaches across a
+    #: silhouette of the object mesh (see core/mixed.py); statistics can exclude them
+    mixed: dict[str, np.ndarray] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)  # sentences for the user (e.g. core.roi.cut_warning)
 
     @property
@@ -234,6 +247,7 @@ class Meshes:
     uncertainty: TriMesh
     object_scene: MeshScene
     uncertainty_scene: MeshScene
+    flying: np.ndarray | None = None  # (H, W) bool depth pixels removed as flying
 
 
 def build_meshes(rig: Rig, depth_m: np.ndarray, params: RegistrationParams | None = None,
@@ -243,16 +257,44 @@ def build_meshes(rig: Rig, depth_m: np.ndarray, params: RegistrationParams | Non
     params = params or RegistrationParams()
     progress = ensure_reporter(progress)
     timings = {} if timings is None else timings
+    depth_raw = depth_m
     dcam = rig.depth()
     lo, hi = params.roi(rig)
-    with _stage(progress, timings, "mesh", 0.0, 0.7):
+    with _stage(progress, timings, "depth filter", 0.0, 0.1):
+        depth_m, flying = filter_depth(depth_m, params)
+    with _stage(progress, timings, "mesh", 0.1, 0.7):
         obj = object_mesh(dcam, depth_m, lo, hi, params.edge_angle_deg, rays_cam)
-        obj = extend_boundary(obj, dcam, params.boundary_px, depth_m)
+        if flying.any() and obj.in_roi is not None:
+            # removed flying pixels inside the ROI stay "object area without a certain surface" (P5)
+            obj.in_roi = obj.in_roi | _flying_in_roi(dcam, flying, depth_raw, lo, hi, rays_cam)
+        obj = extend_boundary(obj, dcam, params.boundary_px, depth_m, flying=flying, depth_raw=depth_raw)
         obj_scene = MeshScene(obj.vertices, obj.triangles)
     with _stage(progress, timings, "uncertainty mesh", 0.7, 1.0):
         unc = uncertainty_mesh(obj, dcam.center_rig, float(hi[2]))
         unc_scene = MeshScene(unc.vertices, unc.triangles)
-    return Meshes(obj, unc, obj_scene, unc_scene)
+    return Meshes(obj, unc, obj_scene, unc_scene, flying)
+
+
+def filter_depth(depth_m: np.ndarray, params: RegistrationParams) -> tuple[np.ndarray, np.ndarray]:
+    """The ToF clean-up the parameters ask for: (cleaned depth (H, W) float32 metres, NaN = none;
+    flying-pixel mask (H, W) bool)."""
+    from .depthfilter import clean_depth
+
+    return clean_depth(depth_m, params.flying_filter, params.flying_jump_rel, params.denoise,
+                       params.denoise_size, params.denoise_tol_rel, params.flying_repair)
+
+
+def _flying_in_roi(dcam: Camera, flying: np.ndarray, depth_m: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                   rays_cam: np.ndarray | None) -> np.ndarray:
+    """(H, W) bool: flying pixels whose raw measurement lies inside the ROI."""
+    idx = np.flatnonzero(flying)
+    d = pixel_rays_cam(dcam)[idx] if rays_cam is None else rays_cam[idx]
+    z = np.asarray(depth_m, dtype=np.float64).reshape(-1)[idx]
+    X = dcam.to_rig(d.astype(np.float64) * z[:, None])
+    out = np.zeros(flying.size, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        out[idx] = np.all((X >= lo) & (X <= hi), axis=1)
+    return out.reshape(flying.shape)
 
 
 @contextmanager
@@ -320,6 +362,26 @@ class Registrar:
             else:  # float64 camera-frame rays of a 4K camera are 200 MB: keep only the float32 result
                 self._rays_rig[cam.name] = pixel_rays_rig(cam)
         return self._rays_rig[cam.name]
+
+    def _mixed(self, scam: Camera, uvh: np.ndarray, case_h: np.ndarray, obj_idx: np.ndarray,
+               shape: tuple[int, int]) -> np.ndarray:
+        """(H, W) bool: P1 pixels whose footprint in ``scam`` reaches across a silhouette (core/mixed.py)."""
+        from .mixed import mixed_radius, silhouette_distance
+
+        meshes = self.meshes
+        assert meshes is not None
+        out = np.zeros(shape[0] * shape[1], dtype=bool)
+        r = mixed_radius(scam, self.params.mixed_radius_px)
+        p1 = np.flatnonzero(case_h == CASE_P1)
+        unc = meshes.uncertainty
+        if r <= 0 or len(p1) == 0 or unc.n_triangles == 0:
+            return out.reshape(shape)
+        # the curtains' top edges are the object mesh's boundary edges (mesh.uncertainty_mesh)
+        n_top, n_edges = unc.n_vertices // 2, unc.n_triangles // 2
+        d = silhouette_distance(scam, unc.vertices[:n_top], unc.triangles[:n_edges, :2], meshes.object_scene,
+                                uvh[p1], self.params.occlusion_tol_m, max_px=r)
+        out[obj_idx[p1]] = d <= r
+        return out.reshape(shape)
 
     @staticmethod
     def _depth_camera_hits(meshes: Meshes, N: int) -> tuple[np.ndarray, ...]:
@@ -411,6 +473,7 @@ class Registrar:
         registered: dict[str, np.ndarray] = {}
         source_uv: dict[str, np.ndarray] = {}
         cases: dict[str, np.ndarray] = {}
+        mixed: dict[str, np.ndarray] = {}
         Xh = points[obj_idx]
 
         # the target itself: its own pixel, its own raw value
@@ -455,6 +518,8 @@ class Registrar:
                 uv = np.full((N, 2), np.nan, dtype=np.float32)
                 uv[obj_idx] = uvh
                 source_uv[scam.name] = uv.reshape(H, W, 2)
+            with _stage(progress, timings, f"mixed {scam.name}", a + 0.45 * (b - a), a + 0.5 * (b - a)):
+                mixed[scam.name] = self._mixed(scam, uvh, case_h, obj_idx, (H, W))
             if scam.name in images:
                 with _stage(progress, timings, f"sampling {scam.name}", a + 0.5 * (b - a), b):
                     img = images[scam.name]
@@ -470,6 +535,8 @@ class Registrar:
                                  "triangles": meshes.uncertainty.n_triangles},
             "target_pixels": int(N),
             "object_hits": int(len(obj_idx)),
+            "flying_pixels": int(meshes.flying.sum()) if meshes.flying is not None else 0,
+            "mixed_pixels": {cam: int(m.sum()) for cam, m in mixed.items()},
         }
         progress(1.0, "done")
         return RegistrationResult(
@@ -482,6 +549,8 @@ class Registrar:
             params=p,
             timings=timings,
             stats=stats,
+            flying=meshes.flying,
+            mixed=mixed,
             warnings=list(self.warnings),
         )
 
@@ -529,7 +598,9 @@ def _mesh_key(rig: Rig, depth_m: np.ndarray, params: RegistrationParams) -> tupl
     lo, hi = params.roi(rig)
     h = hashlib.blake2b(np.ascontiguousarray(depth_m, dtype=np.float32).tobytes(), digest_size=16).hexdigest()
     geom = np.concatenate([dcam.K.ravel(), dcam.dist, dcam.R_cam_rig.ravel(), dcam.t_cam_rig, lo, hi,
-                           [params.edge_angle_deg, params.boundary_px, dcam.width, dcam.height]])
+                           [params.edge_angle_deg, params.boundary_px, dcam.width, dcam.height,
+                            params.flying_filter, params.flying_jump_rel, params.denoise, params.denoise_size,
+                            params.denoise_tol_rel, params.flying_repair]])
     return (h, geom.tobytes())
 
 

@@ -84,65 +84,70 @@ class Rig:
 
     @classmethod
     def from_dict(cls, d: Any, path: str | Path | None = None) -> "Rig":
+        """Build from the rig file's JSON; every type and sanity bound (:mod:`.validate`) is
+        checked here, up front, and a failure names ``path`` and the key (``cameras[2].width``)."""
+        from . import validate as v
+
         def bad(msg: str) -> InputError:
             return InputError(msg, path)
 
         if not isinstance(d, dict):
             raise bad("not a rig file (the top level must be a JSON object)")
         if d.get("format", FORMAT) != FORMAT:
-            raise bad(f"format is '{d.get('format')}', expected '{FORMAT}'")
+            raise bad(f"format is {v.show(d.get('format'))}, expected '{FORMAT}'")
         version = d.get("version", VERSION)
-        if isinstance(version, bool) or not isinstance(version, (int, float)) or not float(version).is_integer():
-            raise bad(f"version must be a whole number, got {version!r}")
+        if not v.is_number(version) or not np.isfinite(version) or not float(version).is_integer():
+            raise bad(f"version must be a whole number, got {v.show(version)}")
         if version > VERSION:
             raise bad(f"rig file version {d.get('version')} is newer than this plantreg reads ({VERSION})")
         cams = d.get("cameras")
         if not isinstance(cams, list) or not cams:
             raise bad("the rig has no cameras (\"cameras\" must be a non-empty list)")
         cameras = []
-        for i, c in enumerate(cams):
-            if not isinstance(c, dict):
-                raise bad(f"cameras[{i}] is not an object")
-            try:
-                cameras.append(Camera.from_dict(c))
-            except ValueError as e:
-                raise bad(f"cameras[{i}]: {e}") from None
-        names = [c.name for c in cameras]
-        dupes = sorted({n for n in names if names.count(n) > 1})
-        if dupes:
-            raise bad(f"camera names must be unique; repeated: {', '.join(dupes)}")
+        try:
+            for i, c in enumerate(cams):
+                cameras.append(Camera.from_dict(c, f"cameras[{i}]"))
+            names = [c.name for c in cameras]
+            v.unique_names(names)
+        except ValueError as e:
+            raise bad(str(e)) from None
         depth = d.get("depth")
         depth_camera, scale = None, 0.001
         if depth is not None:
             if not isinstance(depth, dict) or "camera" not in depth:
                 raise bad("\"depth\" must be {\"camera\": NAME, \"scale\": METRES_PER_UNIT}")
-            depth_camera = str(depth["camera"])
+            if not isinstance(depth["camera"], str):
+                raise bad(f"depth.camera must be a camera name (a string), got {v.show(depth['camera'])}")
+            depth_camera = depth["camera"]
             if depth_camera not in names:
                 raise bad(f"depth camera '{depth_camera}' is not among the cameras ({', '.join(names)})")
-            try:
-                scale = float(depth.get("scale", 0.001))
-            except (TypeError, ValueError):
-                raise bad(f"depth.scale must be a number (metres per depth unit), got {depth.get('scale')!r}") from None
-            if not (scale > 0 and np.isfinite(scale)):
-                raise bad("depth.scale must be positive (metres per depth unit)")
+            scale = depth.get("scale", 0.001)
+            if not v.is_number(scale):
+                raise bad(f"depth.scale must be a number (metres per depth unit), got {v.show(scale)}")
+            scale = float(scale)
+            if not (0 < scale <= v.MAX_DEPTH_SCALE and np.isfinite(scale)):
+                raise bad(f"depth.scale must be positive and at most {v.MAX_DEPTH_SCALE:g} (metres per depth "
+                          f"unit), got {v.show(depth.get('scale'))}")
         roi = d.get("roi", {})
+        if not isinstance(roi, dict):
+            raise bad(f"roi must be {{\"min\": [x, y, z], \"max\": [x, y, z]}}, got {v.show(roi)}")
         try:
-            roi_min = np.asarray(roi.get("min", [-0.5, -0.5, 0.2]), dtype=np.float64)
-            roi_max = np.asarray(roi.get("max", [0.5, 0.5, 1.2]), dtype=np.float64)
-        except (TypeError, ValueError, AttributeError):
-            raise bad("roi must be {\"min\": [x, y, z], \"max\": [x, y, z]}") from None
-        if (roi_min.shape != (3,) or roi_max.shape != (3,) or not np.all(roi_min < roi_max)
-                or not np.all(np.isfinite(roi_min)) or not np.all(np.isfinite(roi_max))):
+            roi_min = v.number_array(roi.get("min", [-0.5, -0.5, 0.2]), "roi.min", (3,), " [x, y, z] in metres")
+            roi_max = v.number_array(roi.get("max", [0.5, 0.5, 1.2]), "roi.max", (3,), " [x, y, z] in metres")
+        except ValueError as e:
+            raise bad(str(e)) from None
+        if not np.all(roi_min < roi_max):
             raise bad("roi min must be below max in x, y and z")
-        extra = {k: v for k, v in d.items() if k not in ("format", "version", "depth", "roi", "cameras")}
+        if np.abs(np.concatenate([roi_min, roi_max])).max() > v.MAX_TRANSLATION_M:
+            raise bad(f"roi reaches beyond {v.MAX_TRANSLATION_M:g} m from the depth camera (metres: millimetres "
+                      "by mistake?)")
+        extra = {k: val for k, val in d.items() if k not in ("format", "version", "depth", "roi", "cameras")}
         return cls(cameras, depth_camera, scale, roi_min, roi_max, extra)
 
     @classmethod
     def load(cls, path: str | Path) -> "Rig":
         path = Path(path)
-        if not path.is_file():
-            raise InputError("rig file not found", path)
-        return cls.from_dict(read_json(path), path)
+        return cls.from_dict(read_json(path, "rig file"), path)
 
     def save(self, path: str | Path) -> None:
         """Write atomically (temp file + rename)."""

@@ -157,9 +157,19 @@ class Board:
         missing = [k for k in ("columns", "rows", "square_size") if k not in d]
         if missing:
             raise ValueError(f"board lacks {', '.join(missing)}")
+        from ..validate import number, positive_int
+
+        from ..validate import show
+
         for k in ("columns", "rows"):  # int() would silently make 8.5 corners 8
-            if isinstance(d[k], (bool, float)) and not (isinstance(d[k], float) and d[k].is_integer()):
-                raise ValueError(f"board: {k} must be a whole number of inner corners, got {d[k]!r}")
+            try:
+                positive_int(d[k], f"board.{k}", 1000)
+            except ValueError:
+                raise ValueError(f"board: {k} must be a whole number of inner corners (1 to 1000), "
+                                 f"got {show(d[k])}") from None
+        number(d["square_size"], "board.square_size (metres)", positive=True)
+        if d.get("marker_size") is not None:
+            number(d["marker_size"], "board.marker_size (metres)", positive=True)
         try:
             return cls(
                 type=str(d.get("type", "chessboard")),

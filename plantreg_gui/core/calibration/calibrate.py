@@ -40,6 +40,10 @@ from .detect import FOUND, MISSING, Detection, check_image_sizes, suggest_board_
 from .session import Session
 
 MIN_VIEWS = 3
+#: A calibration whose joint RMS reprojection error, or one camera's, exceeds this many pixels
+#: has failed (a wrong board size gives ~9 px; good rigs 0.05-0.5 px): ``plantreg calibrate``
+#: writes nothing and exits non-zero unless ``--max-rms`` allows more (docs/errors.md).
+MAX_RMS_PX = 2.0
 WEAK_FACTOR, WEAK_MIN_EXCESS_PX, WEAK_POSE_DEG = 2.0, 0.1, 1.0
 INCONSISTENT_DEG = 5.0
 
@@ -328,6 +332,25 @@ def _too_few_message(session: Session, cam: str, views: dict[str, Detection],
         else:
             msg += f". First failure: {failed[0].path}: {failed[0].reason}"
     return msg
+
+
+def quality_problems(cal: "Calibration", max_rms_px: float = MAX_RMS_PX) -> list[str]:
+    """Why ``cal`` has clearly failed (empty list: it has not): RMS errors above ``max_rms_px``
+    (joint and per camera), or a calibrated camera outside the rig sanity bounds
+    (:mod:`plantreg_gui.core.validate`). Each item is one sentence with the numbers."""
+    out = []
+    if not np.isfinite(cal.joint_rms_px) or cal.joint_rms_px > max_rms_px:
+        out.append(f"joint RMS reprojection error {cal.joint_rms_px:.2f} px exceeds {max_rms_px:g} px")
+    for name, c in cal.intrinsics.items():
+        if not np.isfinite(c.rms_px) or c.rms_px > max_rms_px:
+            out.append(f"camera '{name}': RMS error {c.rms_px:.2f} px exceeds {max_rms_px:g} px "
+                       f"(fx {c.K[0, 0]:.1f}, fy {c.K[1, 1]:.1f} px)")
+    for i, c in enumerate(cal.rig.cameras):
+        try:
+            Camera.from_dict(c.to_dict(), f"camera '{c.name}'")
+        except ValueError as e:
+            out.append(f"the calibrated {e}")
+    return out
 
 
 def calibrate(session: Session, detections: dict[tuple[str, str], Detection],

@@ -74,6 +74,8 @@ class CalibrationReport:
     cameras: dict[str, dict[str, Any]] = field(default_factory=dict)
     weak_views: list[dict[str, Any]] = field(default_factory=list)
     excluded: list[str] = field(default_factory=list)
+    #: problems worth a line in the report and on stderr (e.g. a depth map without valid pixels)
+    warnings: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -81,6 +83,7 @@ class CalibrationReport:
             "intrinsic": self.intrinsic, "extrinsic": self.extrinsic, "depth": self.depth,
             "views": self.views, "depth_bias_mm": self.depth_bias_mm, "depth_bias": self.depth_bias,
             "cameras": self.cameras, "weak_views": self.weak_views, "excluded": self.excluded,
+            "warnings": self.warnings,
         }
 
     # ------------------------------------------------------------------ CSV
@@ -245,6 +248,7 @@ def error_tables(session: Session, calibration: Calibration, detections: dict[tu
     v_depth: dict[str, Any] = {}
     bias_mm: dict[str, float] = {}
     bias: dict[str, dict[str, Any]] = {}
+    warn: list[str] = []
     if session.depth_camera is not None:
         dcam = session.depth_camera
         acc: dict[str, dict[str, list[np.ndarray]]] = {o: {t: [] for t in cams if t != o} for o in cams}
@@ -264,6 +268,10 @@ def error_tables(session: Session, calibration: Calibration, detections: dict[tu
                                  f"{dc.width}x{dc.height}", pose.depth)
             depth_m = raw.astype(np.float32) * np.float32(session.depth_scale)
             depth_m[~(depth_m > 0)] = np.nan
+            if not np.isfinite(depth_m).any():
+                warn.append(f"{pose.depth}: depth map has no valid pixel (all 0 or NaN): no depth errors for "
+                            f"pose {pose.name}")
+                continue
             if pose.name in views[dcam]:
                 b = tof_bias(cal, views[dcam][pose.name], depth_m, pose.name)
                 if b is not None:
@@ -292,4 +300,19 @@ def error_tables(session: Session, calibration: Calibration, detections: dict[tu
                    "normalization": norm[c], "modality": session.cameras[c]} for c in cams}
     weak = [{"pose": p, "camera": c, "px": e, "reason": r} for p, c, e, r in cal.weak_views]
     return CalibrationReport(intrinsic, extrinsic, depth, {"intrinsic": v_intr, "extrinsic": v_ext, "depth": v_depth},
-                             bias_mm, bias, cameras, weak, sorted(view_key(p, c) for p, c in excluded))
+                             bias_mm, bias, cameras, weak, sorted(view_key(p, c) for p, c in excluded), warn)
+
+
+def empty_depth_maps(session: Session) -> tuple[list, list]:
+    """(empty, all) depth-map paths of the session's poses; empty = no pixel > 0 (all 0 or NaN).
+    Cheap (depth maps are small), so a command can check them before any calibration work."""
+    empty, every = [], []
+    for pose in session.poses:
+        if pose.depth is None:
+            continue
+        every.append(pose.depth)
+        raw = read_image(pose.depth)
+        with np.errstate(invalid="ignore"):
+            if not np.any(np.asarray(raw, dtype=np.float64) > 0):
+                empty.append(pose.depth)
+    return empty, every

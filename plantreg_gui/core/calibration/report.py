@@ -14,7 +14,7 @@ import numpy as np
 
 from ... import __version__
 from ..errors import InputError
-from ..imageio import atomic_write_text
+from ..imageio import atomic_files
 from ..progress import Reporter, ensure_reporter
 from ..rig import Rig
 from .calibrate import Calibration, calibrate
@@ -59,13 +59,48 @@ def calibrated_rig(calibration: Calibration, session: Session, report: Calibrati
     return rig
 
 
+#: Every table a report can have as CSV (``<report stem>_<table>.csv``): the names a
+#: command must keep free and the stale ones a rewrite removes.
+CSV_TABLES = ("intrinsic", "extrinsic_px", "extrinsic_normalized", "depth_px", "depth_normalized", "depth_bias")
+
+
+def report_files(report_path: str | Path) -> list[Path]:
+    """The report JSON and every CSV that can go beside it."""
+    p = Path(report_path)
+    return [p] + [p.parent / f"{p.stem}_{t}.csv" for t in CSV_TABLES]
+
+
 def write_report(report: CalibrationReport, path: str | Path) -> list[Path]:
-    """Write the report JSON at ``path`` and its tables as ``<stem>_<table>.csv`` beside it (all
-    atomically). Returns the written paths (JSON first)."""
-    path = Path(path)
-    csvs = report.write_csv(path.parent, prefix=f"{path.stem}_")
-    atomic_write_text(path, json.dumps(report.to_dict(), indent=2, default=_json_default) + "\n")
-    return [path] + csvs
+    """Write the report JSON at ``path`` and its tables as ``<stem>_<table>.csv`` beside it, as
+    one transaction (:func:`write_calibration`). Returns the written paths (JSON first)."""
+    return write_calibration(None, None, report, path)
+
+
+def write_calibration(rig: Rig | None, rig_path: str | Path | None, report: CalibrationReport | None = None,
+                      report_path: str | Path | None = None) -> list[Path]:
+    """Write the rig file, the report JSON and its CSV tables as ONE transaction
+    (:func:`~plantreg_gui.core.imageio.atomic_files`): all of them appear together, or none and
+    the previous set stays as it was (a full disk, a permission error, Ctrl-C or SIGTERM never
+    leave a report without its rig, or destroy the previous report). CSVs of a previous report
+    that the new one does not have are removed with it. Returns the written paths (report JSON,
+    CSVs, then the rig)."""
+    texts: dict[Path, str] = {}
+    stale: list[Path] = []
+    if report is not None and report_path is not None:
+        rp = Path(report_path)
+        texts[rp] = json.dumps(report.to_dict(), indent=2, default=_json_default) + "\n"
+        for name, text in report.csv_tables().items():
+            texts[rp.parent / f"{rp.stem}_{name}.csv"] = text
+        stale = [p for p in report_files(rp)[1:] if p not in texts]
+    if rig is not None and rig_path is not None:
+        texts[Path(rig_path)] = json.dumps(rig.to_dict(), indent=2) + "\n"
+    with atomic_files(list(texts), remove=stale) as tmps:
+        for final, text in texts.items():
+            try:
+                tmps[final].write_text(text, encoding="utf-8")
+            except OSError as e:  # write() errors carry no file name: give it the one being written
+                raise OSError(e.errno, e.strerror or str(e), str(tmps[final])) from None
+    return list(texts)
 
 
 def _json_default(o: Any) -> Any:

@@ -80,8 +80,10 @@ def parse_view_key(key: str) -> tuple[str, str]:
 
 
 def _find_image(folder: Path, stem: str) -> Path | None:
+    # not only regular files: a FIFO or device named ir.png is reported by the reader as such,
+    # not silently treated as a missing image
     hits = sorted(p for p in folder.iterdir()
-                  if p.is_file() and p.stem == stem and p.suffix.lower() in IMAGE_SUFFIXES)
+                  if not p.is_dir() and p.stem == stem and p.suffix.lower() in IMAGE_SUFFIXES)
     return hits[0] if hits else None
 
 
@@ -173,7 +175,9 @@ class Session:
             raise InputError("session folder not found", folder)
         if not path.is_file():
             raise InputError(f"not a calibration session (no {SESSION_FILE})", folder)
-        d = read_json(path)
+        from ..validate import camera_name, show, unique_names
+
+        d = read_json(path, SESSION_FILE)
         if not isinstance(d, dict):
             raise InputError("the top level must be a JSON object", path)
         try:
@@ -184,6 +188,12 @@ class Session:
         if not isinstance(cams, dict) or not cams:
             raise InputError("\"cameras\" must be a non-empty object {NAME: {\"modality\": ...}}", path)
         cameras: dict[str, str] = {}
+        try:
+            for name in cams:
+                camera_name(name, "cameras key")
+            unique_names(list(cams))
+        except ValueError as e:
+            raise InputError(str(e), path) from None
         camera_meta: dict[str, dict[str, Any]] = {}
         for name, c in cams.items():
             if not isinstance(c, dict):
@@ -199,14 +209,17 @@ class Session:
             dd = d["depth"]
             if not isinstance(dd, dict) or "camera" not in dd:
                 raise InputError("\"depth\" must be {\"camera\": NAME, \"scale\": METRES_PER_UNIT}", path)
-            depth_camera = str(dd["camera"])
+            if not isinstance(dd["camera"], str):
+                raise InputError(f"depth.camera must be a camera name (a string), got {show(dd['camera'])}", path)
+            depth_camera = dd["camera"]
             if depth_camera not in cameras:
                 raise InputError(f"depth camera '{depth_camera}' is not among the cameras ({', '.join(cameras)})", path)
-            try:
-                depth_scale = float(dd.get("scale", 0.001))
-            except (TypeError, ValueError):
-                raise InputError("depth.scale must be a number (metres per depth unit)", path) from None
-            if not depth_scale > 0:
+            depth_scale = dd.get("scale", 0.001)
+            if isinstance(depth_scale, bool) or not isinstance(depth_scale, (int, float)):
+                raise InputError(f"depth.scale must be a number (metres per depth unit), got {show(depth_scale)}",
+                                 path)
+            depth_scale = float(depth_scale)
+            if not 0 < depth_scale < float("inf"):
                 raise InputError("depth.scale must be positive (metres per depth unit)", path)
         review = d.get("review") or {}
         if not isinstance(review, dict):

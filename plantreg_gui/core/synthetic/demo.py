@@ -60,10 +60,18 @@ def _scale_K(K: np.ndarray, s: float) -> np.ndarray:
     return _K(K[0, 0] * s, (K[0, 2] + 0.5) * s - 0.5, (K[1, 2] + 0.5) * s - 0.5)
 
 
-def demo_rig(size: str = "demo") -> Rig:
+#: Optical blur of the realistic demo's thermal camera: Gaussian sigma in its pixels (rig key
+#: ``"blur_px"``; microbolometer lenses are soft, and the mixed-pixel flag widens by it)
+THERMAL_BLUR_PX = 1.0
+#: Depth noise of the realistic demo: sigma = 1 mm + 0.1 % of the depth (Azure Kinect-like random error)
+TOF_DEPTH_NOISE = (0.001, 0.001)
+
+
+def demo_rig(size: str = "demo", thermal_blur_px: float = 0.0) -> Rig:
     """The synthetic rig: ``ir`` (depth + infrared, 640x576), ``rgb`` (1280x720, or 3840x2160 for
     ``size="paper"``), ``thermal`` (640x480) and ``hyperspectral`` (256x256 x 100 bands, or
     512x512 x 204 bands for ``"paper"``). Geometry and distortion are documented in docs/demo.md.
+    ``thermal_blur_px`` > 0 gives the thermal camera an optical blur (rig key ``"blur_px"``).
     """
     if size not in SIZES:
         raise InputError(f"unknown demo size '{size}' (choose {' or '.join(SIZES)})")
@@ -94,7 +102,8 @@ def demo_rig(size: str = "demo") -> Rig:
     R, t = _look_at(np.array([0.118, 0.012, -0.008]), AIM_POINT, roll_deg=0.6)
     cams.append(Camera(
         "thermal", "thermal", 640, 480, _K(f_th, 318.6, 242.1),
-        [-0.21, 0.18, 8.0e-4, -5.0e-4, -0.05], R, t, {"units": "degC"},
+        [-0.21, 0.18, 8.0e-4, -5.0e-4, -0.05], R, t,
+        {"units": "degC", **({"blur_px": float(thermal_blur_px)} if thermal_blur_px > 0 else {})},
     ))
 
     # Hyperspectral camera (Specim IQ-like): 31 x 31 degrees, on the other side, toed in.
@@ -128,7 +137,7 @@ def _write_envi(hdr: Path, cube: np.ndarray, bands: list[float]) -> None:
 
 def write_demo(folder: str | Path, size: str = "demo", seed: int = 0, progress: Reporter | None = None,
                *, overwrite: bool = False, calibration: bool = True,
-               supersample: int | None = None) -> dict[str, Path]:
+               supersample: int | None = None, clean: bool = False) -> dict[str, Path]:
     """Write the demo to ``folder`` (built beside it under a temporary name, then moved into place):
 
     ``rig.json``, ``recording/`` (``recording.json``, ``depth.png`` uint16 mm, ``ir.png`` uint16,
@@ -137,15 +146,21 @@ def write_demo(folder: str | Path, size: str = "demo", seed: int = 0, progress: 
     synthetic calibration session of this rig; ``calibration=False`` skips it). Returns the paths
     (in ``folder``) by name: ``rig``, ``recording``, ``ground_truth``, ``calibration``.
     ``supersample`` is passed to :func:`render_recording` (1 = quicker, no anti-aliasing).
+    By default the recording is *realistic*: the depth map has time-of-flight artefacts (flying
+    pixels by footprint mixing, holes on steep surfaces, 1 mm + 0.1 % noise) and the thermal
+    camera an optical blur (``THERMAL_BLUR_PX``); ``clean=True`` gives the ideal recording
+    (exact depth quantised to 1 mm, sharp images) that the accuracy tests use.
     Raises :class:`InputError` if ``folder`` exists and is not empty, unless ``overwrite``.
     """
     progress = ensure_reporter(progress)
     folder = Path(folder)
-    rig = demo_rig(size)
+    rig = demo_rig(size, thermal_blur_px=0.0 if clean else THERMAL_BLUR_PX)
+    depth_noise = (0.0, 0.0) if clean else TOF_DEPTH_NOISE
     with atomic_output_dir(folder, overwrite) as tmp:
         with progress.stage("scene", 0.0, 0.05):
             scene = make_plant_scene(seed)
-        rec = render_recording(rig, scene, seed=seed, progress=progress.sub(0.05, 0.6), supersample=supersample)
+        rec = render_recording(rig, scene, depth_noise, seed=seed, progress=progress.sub(0.05, 0.6),
+                               supersample=supersample, tof=not clean)
         with progress.stage("writing recording", 0.6):
             rig.save(tmp / "rig.json")
             rdir = tmp / "recording"
@@ -163,7 +178,8 @@ def write_demo(folder: str | Path, size: str = "demo", seed: int = 0, progress: 
                     write_tiff(rdir / fn, img)
             manifest: dict[str, Any] = {
                 "depth": "depth.png", "images": {c.name: names.get(c.name, f"{c.name}.tif") for c in rig.cameras},
-                "synthetic": {"generator": "plantreg demo", "size": size, "seed": seed, "depth_noise": [0.0, 0.0],
+                "synthetic": {"generator": "plantreg demo", "size": size, "seed": seed, "depth_noise": list(depth_noise),
+                              "tof_artefacts": not clean,
                               "leaves": [lf.to_dict() for lf in scene.leaves]},
             }
             atomic_write_text(rdir / "recording.json", json.dumps(manifest, indent=2) + "\n")

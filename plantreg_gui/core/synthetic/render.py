@@ -157,6 +157,13 @@ def _render_camera(cam: Camera, scene: Scene, app: Appearance, supersample: int 
         out[r0:r1] = res.reshape(r1 - r0, W, -1)
         progress(r1 / H, f"rendering {cam.name}")
 
+    blur = float(cam.extra.get("blur_px", 0.0) or 0.0)
+    if blur > 0:  # optical blur (e.g. a thermal lens): Gaussian PSF, sigma in the camera's pixels
+        for c0 in range(0, out.shape[2], 4):
+            blk = np.ascontiguousarray(out[..., c0:c0 + 4])
+            res_b = cv2.GaussianBlur(blk, (0, 0), blur, borderType=cv2.BORDER_REPLICATE)
+            out[..., c0:c0 + 4] = res_b.reshape(blk.shape)
+
     # sensor noise and encoding
     if mod == "infrared":
         img = out[..., 0]
@@ -203,15 +210,82 @@ def render_depth(rig: Rig, scene: Scene, depth_noise: tuple[float, float] = (0.0
     return np.clip(q, 0, 65535).astype(np.uint16).reshape(cam.shape)
 
 
+#: ToF artefacts of :func:`render_tof_depth`: footprint samples per axis, and the incidence angles
+#: (between the viewing ray and the surface normal) over which the return fades out into holes
+TOF_FOOTPRINT_SS = 4
+TOF_HOLE_ANGLES_DEG = (70.0, 82.0)
+
+
+def render_tof_depth(rig: Rig, scene: Scene, depth_noise: tuple[float, float] = (0.001, 0.001),
+                     rng: np.random.Generator | None = None, footprint_ss: int = TOF_FOOTPRINT_SS,
+                     hole_angles_deg: tuple[float, float] = TOF_HOLE_ANGLES_DEG) -> np.ndarray:
+    """Depth map (H, W) uint16 (units of ``rig.depth_scale``) with time-of-flight artefacts:
+
+    * **footprint mixing (flying pixels)**: each pixel integrates its whole footprint
+      (``footprint_ss`` x ``footprint_ss`` samples over the pixel's square); where it straddles
+      two surfaces (a leaf and the ground) it reports the mean z of what it sees, a depth in
+      between that belongs to neither;
+    * **holes on steep surfaces**: the return fades with the incidence angle at the pixel
+      centre's hit; beyond ``hole_angles_deg[0]`` a pixel is dropped (0) with a probability
+      rising linearly to 1 at ``hole_angles_deg[1]``;
+    * **noise**: Gaussian, sigma ``abs + rel * z`` (``depth_noise``), then quantisation.
+
+    ``rng`` None: no noise and deterministic holes (dropped beyond the middle angle).
+    """
+    cam = rig.depth()
+    H, W = cam.shape
+    ss = max(1, int(footprint_ss))
+    off = (np.arange(ss) + 0.5) / ss - 0.5
+    du, dv = np.meshgrid(off, off)
+    offs = np.stack([du.ravel(), dv.ravel()], axis=1)
+    axis = cam.R_cam_rig[2]  # optical axis in the rig frame: z_cam = axis . (X - C)
+    z = np.zeros(H * W)
+    cos_in = np.ones(H * W)
+    rows = max(1, RAY_CHUNK // (W * ss * ss))
+    for r0 in range(0, H, rows):
+        r1 = min(H, r0 + rows)
+        o, d = _render_rays_grid(cam, r0, r1, offs)
+        t, prim, _bary = scene.cast(o, d)
+        zs = (t[:, None] * d @ axis[:, None])[:, 0].reshape(-1, ss * ss)  # inf where no hit
+        hit = np.isfinite(zs)
+        with np.errstate(invalid="ignore"):
+            zm = np.where(hit, zs, 0).sum(axis=1) / np.maximum(hit.sum(axis=1), 1)
+        zm[hit.sum(axis=1) < (ss * ss + 1) // 2] = 0  # mostly nothing: no return
+        z[r0 * W:r1 * W] = zm
+        # incidence at the centre of the footprint (the nearest sample to it)
+        oc, dc = _render_rays(cam, np.stack(np.meshgrid(np.arange(W), np.arange(r0, r1)), -1).reshape(-1, 2)
+                              .astype(np.float64))
+        _tc, pc, bc = scene.cast(oc, dc)
+        ok = pc >= 0
+        n = scene.surface(pc[ok], bc[ok], points=False)["normal"]
+        ci = np.ones(len(dc))
+        ci[ok] = np.abs(np.einsum("ij,ij->i", n, dc[ok]))
+        cos_in[r0 * W:r1 * W] = ci
+    ang = np.degrees(np.arccos(np.clip(cos_in, 0, 1)))
+    a0, a1 = hole_angles_deg
+    p_drop = np.clip((ang - a0) / max(a1 - a0, 1e-9), 0, 1)
+    drop = (rng.random(len(z)) < p_drop) if rng is not None else p_drop >= 0.5
+    hit = z > 0
+    sa, sr = depth_noise
+    if (sa > 0 or sr > 0) and rng is not None:
+        z[hit] += (sa + sr * z[hit]) * rng.standard_normal(int(hit.sum()))
+    q = np.round(z / rig.depth_scale)
+    q[~hit | drop | (q < 0)] = 0
+    return np.clip(q, 0, 65535).astype(np.uint16).reshape(H, W)
+
+
 def render_recording(rig: Rig, scene: Scene, depth_noise: tuple[float, float] = (0.0, 0.0), seed: int = 0,
                      progress: Reporter | None = None, *, sensor_noise: bool = True,
-                     supersample: int | None = None) -> Recording:
+                     supersample: int | None = None, tof: bool = False) -> Recording:
     """Render the depth map and every camera's image of ``scene`` as seen by ``rig``.
 
     Images: infrared uint16 (active illumination, leaves bright), RGB uint8, thermal float32 degC,
     hyperspectral float32 reflectance (H, W, B), other modalities float32 grey. ``sensor_noise``
     adds mild, seeded image noise (never to the depth: that is ``depth_noise``). ``supersample``
-    forces the per-axis supersampling (default: 2 up to ~2 Mpx, else 1).
+    forces the per-axis supersampling (default: 2 up to ~2 Mpx, else 1). ``tof``: the depth map
+    gets time-of-flight artefacts (:func:`render_tof_depth`: flying pixels by footprint mixing,
+    holes on steep surfaces, ``depth_noise``). A camera with ``"blur_px"`` in its extra keys is
+    blurred optically (Gaussian, that sigma in its pixels) before its sensor noise.
     Returns an in-memory :class:`Recording` (``folder`` None).
     """
     progress = ensure_reporter(progress)
@@ -220,12 +294,14 @@ def render_recording(rig: Rig, scene: Scene, depth_noise: tuple[float, float] = 
     weights = np.array([c.width * c.height * max(1, _channels(c)) ** 0.3 for c in rig.cameras], dtype=float)
     edges = np.concatenate([[0.05], 0.05 + 0.95 * np.cumsum(weights) / weights.sum()])
     with progress.stage("depth", 0.0, 0.05):
-        depth = render_depth(rig, scene, depth_noise, np.random.default_rng([seed, 0]))
+        drng = np.random.default_rng([seed, 0])
+        depth = render_tof_depth(rig, scene, depth_noise, drng) if tof else render_depth(rig, scene, depth_noise, drng)
     for i, cam in enumerate(rig.cameras):
         with progress.stage(f"render {cam.name}", edges[i]):
             crng = np.random.default_rng([seed, 2, i]) if sensor_noise else None
             images[cam.name] = _render_camera(cam, scene, app, supersample, crng, progress.sub(edges[i], edges[i + 1]))
-    return Recording(None, depth, images, extra={"synthetic": {"seed": seed, "depth_noise": list(depth_noise)}})
+    return Recording(None, depth, images, extra={"synthetic": {"seed": seed, "depth_noise": list(depth_noise),
+                                                               "tof_artefacts": bool(tof)}})
 
 
 # ---------------------------------------------------------------------- ground truth

@@ -70,6 +70,7 @@ def _draw_axes(p: QPainter, panel: _Panel, title: str, ylabel: str, xlabels: lis
         p.drawLine(QPointF(r.left() - 3, y), QPointF(r.left(), y))
         s = _fmt_tick(v)
         p.drawText(QPointF(r.left() - 5 - fm.horizontalAdvance(s), y + fm.ascent() / 2 - 1), s)
+    p.setBrush(Qt.BrushStyle.NoBrush)  # the frame only: the brush is left from the previous panel's bars
     p.drawRect(r)
     step = max(1, math.ceil(len(xlabels) * (fm.horizontalAdvance("00") + 4) / max(r.width(), 1)))
     for i, s in enumerate(xlabels):

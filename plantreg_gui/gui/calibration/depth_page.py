@@ -35,7 +35,7 @@ class DepthPage(WizardPage):
         g2l.addWidget(self.bias)
         ll.addWidget(g2, 1)
         split.addWidget(left)
-        g3 = QGroupBox("Per-view breakdown: depth error per pose (px), worst first")
+        g3 = QGroupBox("Per-view breakdown: depth error per pose (px and normalised), worst first")
         g3l = QVBoxLayout(g3)
         hb = QHBoxLayout()
         hb.addWidget(QLabel("Origin camera:"))

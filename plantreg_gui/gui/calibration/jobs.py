@@ -9,7 +9,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ...core.calibration import Detection, calibrate, calibrated_rig, error_tables, write_report
+from ...core.calibration import Detection, calibrate, calibrated_rig, error_tables
 from ...core.calibration.preview import detect_with_thumbnail
 from ...core.process_job import run_in_process
 from ...core.progress import Reporter, ensure_reporter
@@ -78,7 +78,7 @@ def demo_job(folder: Path, progress: Reporter | None = None) -> Path:
 def save_job(calibration, session, report, excluded: set[Key], rig_path: Path, report_path: Path | None,
              roi_min: np.ndarray, roi_max: np.ndarray, progress: Reporter | None = None) -> dict[str, str]:
     """Write the rig file (ROI and provenance inside) and the report JSON with its CSV tables
-    beside it, with the engine's writers (each file atomically)."""
+    beside it, with the engine's writers (all together, as one transaction)."""
     progress = ensure_reporter(progress)
     progress(0.1, "writing rig file")
     rig = calibrated_rig(calibration, session, report, roi=(np.asarray(roi_min, float), np.asarray(roi_max, float)),
@@ -86,12 +86,15 @@ def save_job(calibration, session, report, excluded: set[Key], rig_path: Path, r
     rig_path = Path(rig_path)
     rig_path.parent.mkdir(parents=True, exist_ok=True)
     out: dict[str, str] = {"rig": str(rig_path)}
+    from ...core.calibration.report import write_calibration
+
     if report is not None and report_path is not None:
-        progress(0.4, "writing report and CSV tables")
+        progress(0.4, "writing rig file, report and CSV tables")
         Path(report_path).parent.mkdir(parents=True, exist_ok=True)
-        paths = write_report(report, report_path)
+    # one transaction: all files appear together, or none and the previous set stays
+    paths = write_calibration(rig, rig_path, report, report_path)
+    if report is not None and report_path is not None:
         out["report"] = str(paths[0])
-        out["csv"] = ", ".join(p.name for p in paths[1:])
-    rig.save(rig_path)  # last: a rig file on disk means everything else was written
+        out["csv"] = ", ".join(p.name for p in paths[1:-1])
     progress(1.0, "saved")
     return out

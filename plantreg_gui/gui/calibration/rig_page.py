@@ -79,7 +79,7 @@ class RigPage(WizardPage):
         cbox = QGroupBox("Cameras")
         cl = QVBoxLayout(cbox)
         self.cameras = QTableWidget(0, 4)
-        self.cameras.setHorizontalHeaderLabels(["Name (= image file name)", "Modality", "Units", "Bands (nm)"])
+        self.cameras.setHorizontalHeaderLabels(["Name (= file name)", "Modality", "Units", "Bands (nm)"])
         self.cameras.horizontalHeaderItem(2).setToolTip("What a pixel value means, e.g. degC, DN, reflectance "
                                                         "(kept in the rig file)")
         self.cameras.horizontalHeaderItem(3).setToolTip("Band centres of a multi-band camera in nm: a list "
@@ -87,6 +87,8 @@ class RigPage(WizardPage):
                                                         "'400-1000/100' (kept in the rig file; the registration "
                                                         "shows spectra in nm with it)")
         self.cameras.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+        for col in (2, 3):  # units and bands take what they need; name and modality share the rest
+            self.cameras.horizontalHeader().setSectionResizeMode(col, QHeaderView.ResizeMode.ResizeToContents)
         self.cameras.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.cameras.itemChanged.connect(self._changed)
         self.cameras.setMaximumHeight(230)

@@ -393,10 +393,10 @@ class SavePage(WizardPage):
         p.resetTransform()
         p.setPen(QColor(0, 230, 230))
         f = p.font()
-        f.setPixelSize(max(12, pm.height() // 40))
+        f.setPixelSize(max(8, pm.height() // 32))  # the preview is shown scaled up
         f.setBold(True)
         p.setFont(f)
-        p.drawText(8, pm.height() - 10, f"ground plane z = {hi[2]:.2f} m (cyan grid, 10 cm); ROI box in yellow")
+        p.drawText(4, pm.height() - 4, f"ground plane z = {hi[2]:.2f} m")
         p.end()
 
     def _roi_banner(self, X: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:

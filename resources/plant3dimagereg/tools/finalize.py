@@ -4,7 +4,7 @@
 "r2": {...}}} — two readings of the same silhouette feature (leaf tip, notch, corner, sinus) on
 fresh crops (different offsets and zoom, no marks; ``reclick.py``). A point is kept when the
 readings agree (<= 2 px infrared, <= 4 px in the other camera); the landmark is their mean, then
-moved inward onto the leaf until the infrared pixel is valid and its 3x3 neighbourhood (>= 7 valid) has
+moved inward onto the leaf (from 0 px) until the infrared pixel is valid, within 25 mm of the leaf 4 px further in, and its 3x3 neighbourhood (>= 7 valid) has
 consistent depth (a silhouette point itself is a flying pixel or a hole; up to 10 px), and the other camera's
 point is moved inward by the same physical distance (x 1.8 hyperspectral, x 2.2 thermal pixels per
 infrared pixel near the plants) along its own silhouette's inward normal.
@@ -58,12 +58,16 @@ def main() -> None:
         ni = inward_normal(plant, "ir", pi, 8.0)
         no = inward_normal(plant, cam, po, 8.0 * SCALE[cam])
         step = None
-        for s in np.arange(0.5, 10.01, 0.5):
+        for s in np.arange(0.0, 10.01, 0.5):
             u, v = np.round(pi + ni * s).astype(int)
             blk = d[v - 1:v + 2, u - 1:u + 2].astype(float)
             ok = blk[blk > 0]
+            u2, v2 = np.round(pi + ni * (s + 4)).astype(int)  # the same leaf 4 px further in
+            inner = d[v2 - 1:v2 + 2, u2 - 1:u2 + 2].astype(float)
+            inner = inner[inner > 0]
             if (blk.shape == (3, 3) and 0 < blk[1, 1] < 1130 and ok.size >= 7  # on the plant, not the tray
-                    and np.max(np.abs(ok - np.median(ok))) < 15 and abs(blk[1, 1] - np.median(ok)) < 8):
+                    and np.max(np.abs(ok - np.median(ok))) < 15 and abs(blk[1, 1] - np.median(ok)) < 8
+                    and inner.size and abs(blk[1, 1] - np.median(inner)) < 25):
                 step = float(s)
                 break
         if step is None:
