@@ -332,7 +332,7 @@ class LandmarkPage(QWidget):
             label = f"{i}" + (f": {r:.1f} px" if r is not None else "")
             col = (255, 220, 0) if r is None or r < 3 else (255, 140, 0) if r < 8 else (255, 60, 60)
             if s.camera not in lm.cameras:  # a point of another camera: grey, drawn underneath
-                left.insert(0, Marker(i, lm.depth_uv, f"{i}", colour=(150, 150, 150)))
+                left.insert(0, Marker(i, lm.depth_uv, "", colour=(150, 150, 150)))  # no label: they pile up
                 continue
             left.append(Marker(i, lm.depth_uv, label, colour=col))
             if s.camera in lm.cameras:
@@ -345,7 +345,7 @@ class LandmarkPage(QWidget):
         left, right = self._markers()
         self.left.set_markers(left, s.selected, s.pending)
         self.right.set_markers(right, s.selected)
-        self.over.set_markers([Marker(m.index, m.uv, str(m.index), colour=m.colour) for m in left], s.selected)
+        self.over.set_markers([Marker(m.index, m.uv, "", colour=m.colour) for m in left if m.label], s.selected)
         rows = s.table()
         self.table.blockSignals(True)
         self.table.setRowCount(len(rows))
