@@ -138,6 +138,7 @@ class RegistrationWorkspace(QWidget):
         self.file_menu.addAction("Open Plant3DImageReg recording…", lambda: self._guard(self._ask_plant3d))
         self.recent_menu = self.file_menu.addMenu("Open recent")
         self.recent_menu.aboutToShow.connect(self._fill_recent)
+        self.file_menu.addAction("Fit rig from landmarks…", lambda: self.window().show_landmarks(self.rig_path, getattr(self.recording, "folder", None)))  # noqa: E501
         self.file_menu.addSeparator()
         self.file_menu.addAction("Load demo", lambda: self._guard(self.load_demo))
         self.export_action = self.file_menu.addAction("Export…", self._ask_export)
