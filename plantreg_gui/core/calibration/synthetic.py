@@ -447,5 +447,5 @@ def example_rig() -> Rig:
     cams.append(Camera("thermal", "thermal", 640, 480, K(900.0, 640, 480, 4.0, 2.0), [-0.12, 0.2, 0.0, 0.0, 0.0], R, t))
     R, t = look_at([0.10, 0.05, 0.012], (0.0, 0.0, 0.75), 1.1)
     cams.append(Camera("hyperspectral", "hyperspectral", 256, 256, K(420.0, 256, 256, 1.5, -2.0), [-0.05, 0.02, 0, 0, 0], R, t,
-                       extra={"bands": 8}))
+                       extra={"bands": [400.0 + 600.0 * k / 7 for k in range(8)]}))  # 8 band centres, nm
     return Rig(cams, "ir", 0.001, np.array([-0.5, -0.5, 0.3]), np.array([0.5, 0.5, 1.2]))
