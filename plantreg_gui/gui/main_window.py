@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -77,8 +78,11 @@ class MainWindow(QMainWindow):
     # ------------------------------------------------------------------ screenshots
     def screenshot_when_idle(self, path: Path, timeout: float) -> None:
         """Poll until no view is busy (and stays idle briefly), then grab the window and quit."""
+        from .workers import SHOWN_ERRORS
+
         t0 = time.monotonic()
         state = {"idle_since": None}
+        n_errors = len(SHOWN_ERRORS)
 
         def tick() -> None:
             now = time.monotonic()
@@ -92,7 +96,10 @@ class MainWindow(QMainWindow):
                 return
             timer.stop()
             self.save_screenshot(path)
-            QApplication.instance().exit(0 if now - t0 < timeout else 3)
+            errors = SHOWN_ERRORS[n_errors:]
+            for title, msg in errors:  # shown in a dialog nobody will see: say it and fail
+                print(f"plantreg-gui: error: {title}: {msg}", file=sys.stderr)
+            QApplication.instance().exit(1 if errors else 0 if now - t0 < timeout else 3)
 
         timer = QTimer(self)
         timer.timeout.connect(tick)

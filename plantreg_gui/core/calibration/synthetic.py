@@ -32,6 +32,7 @@ from ..imageio import atomic_output_dir, atomic_write_text, write_png, write_tif
 from ..progress import Reporter, ensure_reporter
 from ..rig import Rig
 from .board import Board
+from .. import modality as _modality
 from .session import SESSION_FILE
 
 TRUTH_FILE = "truth.json"
@@ -41,14 +42,11 @@ MIN_SQUARE_PX = 6.0
 
 # ---------------------------------------------------------------------- helpers
 def _kind(modality: str) -> str:
-    m = modality.lower()
-    if "therm" in m:
-        return "thermal"
-    if "hyper" in m or "spectral" in m:
-        return "hyperspectral"
-    if m in ("ir", "nir", "infrared", "depth") or "infra" in m:
-        return "infrared"
-    return "visible"
+    """How a camera of this modality sees the board: 'visible', 'infrared', 'thermal' or 'hyperspectral'."""
+    m = _modality.canonical(modality)
+    if m in ("thermal", "hyperspectral", "infrared"):
+        return m
+    return "infrared" if m == "depth" else "visible"
 
 
 def _rot(axis: str, deg: float) -> np.ndarray:
