@@ -177,7 +177,7 @@ def test_refine_runs_on_a_worker_with_progress_and_cancel(qtbot, page, demo):
     assert s.rig.to_dict() == rig0
     # a full run (reduced levels: the demo start is 3 degrees off)
     s.refine_fn = None
-    job = s.refine_job(params=RefineParams(levels_deg=(1.6, 0.8, 0.4, 0.0)))
+    job = s.refine_job(params=RefineParams(levels_deg=(1.6, 0.4, 0.0), max_points=2000, min_points=1000))
     from plantreg_gui.gui.workers import Worker
 
     seen = []

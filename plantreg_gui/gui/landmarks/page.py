@@ -211,11 +211,10 @@ class LandmarkPage(QWidget):
         lay.addWidget(self.hint)
         lay.addWidget(main, 1)
 
-        for key in NUDGE_KEYS:
-            for mod in (Qt.KeyboardModifier.NoModifier, Qt.KeyboardModifier.ShiftModifier):
-                sc = QShortcut(QKeySequence(key | mod), self)
-                sc.setContext(Qt.ShortcutContext.WidgetWithChildrenShortcut)
-                sc.activated.connect(lambda k=key, m=mod: self.nudge_key(k, m == Qt.KeyboardModifier.ShiftModifier))
+        # nudge keys: an event filter on the views (which would otherwise scroll with the arrows)
+        # and the page's keyPressEvent, so they work wherever the focus is on this page
+        for v in (self.left, self.right, self.over):
+            v.installEventFilter(self)
         for seq, fn in ((QKeySequence.StandardKey.Undo, lambda: self._do(self.session.undo)),
                         (QKeySequence.StandardKey.Redo, lambda: self._do(self.session.redo)),
                         (QKeySequence(Qt.Key.Key_Delete), lambda: self._do(self.session.delete_point)),
@@ -443,10 +442,24 @@ class LandmarkPage(QWidget):
             self.session.select(int(items[0].data(Qt.ItemDataRole.UserRole)))
 
     # ------------------------------------------------------------------ nudge
+    def eventFilter(self, obj, e) -> bool:  # noqa: N802
+        from PySide6.QtCore import QEvent
+
+        if e.type() == QEvent.Type.KeyPress and e.key() in NUDGE_KEYS:
+            self.nudge_key(e.key(), bool(e.modifiers() & Qt.KeyboardModifier.ShiftModifier))
+            return True
+        return super().eventFilter(obj, e)
+
+    def keyPressEvent(self, e) -> None:  # noqa: N802
+        if e.key() in NUDGE_KEYS:
+            self.nudge_key(e.key(), bool(e.modifiers() & Qt.KeyboardModifier.ShiftModifier))
+        else:
+            super().keyPressEvent(e)
+
     def nudge_key(self, key, fast: bool = False) -> None:
         if self.session is None or self.is_busy(include_overlay=False):
             return
-        kind, axis, sign = NUDGE_KEYS[key]
+        kind, axis, sign = NUDGE_KEYS[Qt.Key(key)]
         step = self.rot_step.value() if kind == "rotate" else self.trans_step.value() / 1000.0
         self._do(self.session.nudge, kind, axis, sign * step * (5.0 if fast else 1.0))
 
