@@ -851,3 +851,72 @@ def test_gui_open_paths_show_one_readable_message(qapp, tmp_path):
         for b in wiz.findChildren(QMessageBox):
             b.close()
         wiz.deleteLater()
+
+
+# ---------------------------------------------------------------------- plantreg batch
+BAD_RIGS = [b for b in BAD_REGISTER if b.__name__.startswith("_rig_")]
+BAD_RECORDINGS = [_structured_npy, _complex_npy, _npy_7tib, _png_truncated, _jpeg_truncated, _fifo_image,
+                  _path_null, _recording_deep, _envi_100k_bands]
+
+
+@pytest.mark.parametrize("breaker", BAD_RIGS, ids=[b.__name__.strip("_") for b in BAD_RIGS])
+def test_batch_refuses_a_bad_rig_before_any_work(tmp_path, capsys, monkeypatch, breaker):
+    """A broken rig stops the whole batch up front: one line naming the rig, exit 1, no OUT."""
+    from plantreg_gui.core import batch as batch_mod
+
+    rig, rec = _write_inputs(tmp_path)
+    culprit, words = breaker(rig, rec, tmp_path)
+
+    def never(*a, **k):
+        raise AssertionError("the batch must not start")
+
+    monkeypatch.setattr(batch_mod, "run", never)
+    out = tmp_path / "out"
+    code = cli.main(["batch", "--rig", str(rig), "--target", "ir", "--out", str(out), "--quiet", str(rec)])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    assert str(culprit) in err, err
+    for w in words:
+        assert w in err, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not os.path.lexists(out) and not _no_leftovers(tmp_path)
+
+
+@pytest.mark.parametrize("breaker", BAD_RECORDINGS, ids=[b.__name__.strip("_") for b in BAD_RECORDINGS])
+def test_batch_isolates_a_bad_recording(tmp_path, capsys, breaker):
+    """One hostile recording among good ones: its row says failed with the file and the cause, the good
+    ones are done, the exit code is 1, and the bad one leaves no output folder (complete-looking or not)."""
+    good_root, bad_root = tmp_path / "good", tmp_path / "bad"
+    good_root.mkdir()
+    bad_root.mkdir()
+    rig, good = _write_inputs(good_root)
+    _, bad = _write_inputs(bad_root)
+    bad = bad.rename(bad_root / "bad_rec")
+    culprit, words = breaker(rig, bad, bad_root)
+    out = tmp_path / "out"
+    code = cli.main(["batch", "--rig", str(rig), "--target", "ir", "--out", str(out), "--workers", "1", "--quiet",
+                     str(good), str(bad)])
+    captured = capsys.readouterr()
+    assert code == 1, captured.err
+    assert "Traceback" not in captured.err + captured.out
+    import csv
+
+    rows = {r["name"]: r for r in csv.DictReader((out / "batch.csv").open())}
+    assert rows["rec"]["status"] == "done" and (out / "rec" / "summary.json").is_file()
+    assert rows["bad_rec"]["status"] == "failed", rows["bad_rec"]
+    assert Path(str(culprit)).name in rows["bad_rec"]["error"], rows["bad_rec"]
+    assert "\n" not in rows["bad_rec"]["error"]
+    assert not (out / "bad_rec").exists() and not _no_leftovers(out)
+
+
+def test_batch_empty_out_and_missing_recording(tmp_path, capsys):
+    rig, rec = _write_inputs(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        cli.main(["batch", "--rig", str(rig), "--target", "ir", "--out", "", str(rec)])
+    assert e.value.code == 2 and "must not be empty" in capsys.readouterr().err
+    out = tmp_path / "out"
+    code = cli.main(["batch", "--rig", str(rig), "--target", "ir", "--out", str(out), "--workers", "1", "--quiet",
+                     str(rec), str(tmp_path / "nowhere")])
+    captured = capsys.readouterr()
+    assert code == 1 and "Traceback" not in captured.err
+    assert "nowhere" in captured.err + captured.out

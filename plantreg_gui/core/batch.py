@@ -145,13 +145,19 @@ def job_hash(settings: BatchSettings, recording: str | Path) -> str:
                                 "tiff_codec": settings.tiff_codec}, sort_keys=True).encode())
     manifest = rec / "recording.json"
     add("manifest", manifest.read_bytes())
-    m = json.loads(manifest.read_text(encoding="utf-8"))
-    files = [m.get("depth")] + list((m.get("images") or {}).values())
+    from .imageio import read_json_object
+
+    m = read_json_object(manifest, "recording file")  # a hostile manifest is an InputError, not a crash
+    images = m.get("images")
+    files = [m.get("depth")] + (list(images.values()) if isinstance(images, dict) else [])
     for rel in files:
-        if not rel:
-            continue
-        p = rec / str(rel)
-        st = p.stat()
+        if not isinstance(rel, str) or not rel:
+            continue  # Recording.load names what is wrong with it
+        p = rec / rel
+        try:
+            st = p.stat()
+        except OSError:
+            continue  # likewise: a missing or unreadable file is reported by Recording.load
         add("file", f"{rel}\0{st.st_size}\0{st.st_mtime_ns}".encode())
         if p.suffix.lower() == ".hdr":  # the ENVI data file beside the header
             for data in (p.with_suffix(".img"), p.with_suffix(""), p.with_suffix(".raw")):
