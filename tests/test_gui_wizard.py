@@ -20,7 +20,7 @@ from PySide6.QtWidgets import QMessageBox
 
 pytestmark = pytest.mark.gui
 
-WAIT_MS = 240_000
+WAIT_MS = 600_000  # generous: a loaded 2-core machine detects the demo session slowly
 
 
 def _wizard(qtbot):
@@ -179,7 +179,8 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
         assert cells
         for cell in cells:
             px, nn = (float(x.split()[0]) for x in cell.text().split("\n"))
-            assert px > 0 and nn > 0 and cell.background().color() == grade_colour(nn)
+            assert px > 0 and nn > 0  # the colour is the normalised error's (shown rounded to 0.001)
+            assert abs(cell.background().color().hueF() - grade_colour(nn).hueF()) < 0.01
         assert dp.views_legend.isVisible() and "normalised" in dp.views_legend.text()
 
         # --- page 7: ROI, save; the files against the truth

@@ -7,11 +7,13 @@ calibration, error tables and the pages' redraws in one go.
 
 Tolerance. The goal is no gap over 200 ms on an idle 2-core machine
 (``benchmarks/bench_wizard_stalls.py`` measures it). Tests run on machines shared with other
-work, where the operating system alone holds a process off the CPU for a second or more. So a
-*control process* (same priority, no Qt, no GIL shared with us) runs a 20 ms sleep loop over the
-same interval and records its own largest gap; the test allows ``max(1.0 s, 0.5 s + 2 x
-control)``. A freeze of our making (work on the GUI thread, a worker holding the GIL: the
-seconds-long stalls this guards against) shows in the probe but not in the control, and fails.
+work, where a process that wants the CPU waits for it (at a load of 20 on 2 cores, 50 ms of
+painting takes half a second). So a *control process* (same priority, no Qt, no GIL shared with
+us) alternates 20 ms of CPU work and 20 ms of sleep over the same interval, like an event loop,
+and records how much longer than 40 ms its worst cycle took; the test allows
+``max(1.0 s, 0.5 s + 3 x control)`` (3: some of the GUI's slots run longer than 20 ms). On an
+idle machine that is 1 s: the freezes this guards against (seconds of work on the GUI thread or
+of a worker holding the GIL) fail it; at a load of 20 the test is correspondingly weaker.
 """
 
 from __future__ import annotations
@@ -26,11 +28,14 @@ pytestmark = pytest.mark.gui
 
 CONTROL = """
 import os, sys, time
-flag, last, worst = sys.argv[1], time.perf_counter(), 0.0
+flag, worst = sys.argv[1], 0.0
 while not os.path.exists(flag):
-    time.sleep(0.02)
-    now = time.perf_counter()
-    worst, last = max(worst, now - last), now
+    t0 = time.perf_counter()
+    c0 = time.process_time()
+    while time.process_time() - c0 < 0.02:  # 20 ms of CPU work, like an event-loop slot ...
+        pass
+    time.sleep(0.02)  # ... then idle
+    worst = max(worst, time.perf_counter() - t0 - 0.04)
 print(worst)
 """
 
@@ -80,7 +85,7 @@ def test_resuming_a_session_on_page_7_never_freezes_the_gui(qtbot, shared_data, 
                 w.go_to_page(page)
                 qtbot.wait(100)
         base = control.stop()
-        allowed = max(1.0, 0.5 + 2 * base)
+        allowed = max(1.0, 0.5 + 3 * base)
         assert w.model.calibration_ready() and w.model.report_ready(), w.last_error
         assert probe.ticks > 20
         assert probe.max_gap < allowed, (
