@@ -30,5 +30,82 @@ def demo_dir(tmp_path_factory) -> Path:
 def shared_data() -> Path:
     """`../shared/data` beside the project (real data sets)."""
     if not SHARED.is_dir():
-        pytest.fail(f"shared data folder not found at {SHARED} (put shared/ beside the project or set PLANTREG_SHARED_DATA)")
+        pytest.skip(f"shared data folder not found at {SHARED} (put shared/ beside the project or set "
+                    "PLANTREG_SHARED_DATA)")
     return SHARED
+
+
+# ---------------------------------------------------------------------- the registration workspace
+@pytest.fixture(scope="session")
+def demo_registered(demo_dir):
+    """The demo read and registered into ``ir`` once per test session, as the workspace's jobs
+    return it (Qt-free): ``{"loaded": load_job output, "registered": register_job output}``.
+    Apply copies with :func:`workspace_session_outputs`; never mutate these."""
+    from plantreg_gui.core.progress import Reporter
+    from plantreg_gui.gui.registration.session import load_job, register_job
+
+    loaded = load_job(demo_dir / "rig.json", demo_dir / "recording", None, {}, progress=Reporter())
+    registered = register_job(None, loaded["rig"], loaded["recording"], "ir", {}, progress=Reporter())
+    return {"loaded": loaded, "registered": registered}
+
+
+def workspace_session_outputs(demo_registered) -> tuple[dict, dict]:
+    """Shallow copies of the cached job outputs whose mutable parts (renderings, cloud colours)
+    a test may change without affecting the next test."""
+    import copy
+
+    loaded = dict(demo_registered["loaded"], renders=dict(demo_registered["loaded"]["renders"]))
+    reg = dict(demo_registered["registered"])
+    reg["renders"] = dict(reg["renders"])
+    cloud = copy.copy(reg["cloud"])
+    cloud.colours = dict(cloud.colours)
+    reg["cloud"] = cloud
+    return loaded, reg
+
+
+@pytest.fixture
+def no_qt_leaks(qapp):
+    """Fail a test that leaves top-level widgets open or worker threads running (as napari's and
+    pyvistaqt's conftests do). Yields; checks after the test."""
+    from PySide6.QtCore import QThread
+    from PySide6.QtWidgets import QApplication
+
+    before = {id(w) for w in QApplication.topLevelWidgets()}
+    yield
+    for _ in range(3):  # let deleteLater() happen
+        QApplication.sendPostedEvents(None, 0)
+        QApplication.processEvents()
+    left = [w for w in QApplication.topLevelWidgets() if id(w) not in before and w.isVisible()]
+    from plantreg_gui.gui.workers import Worker
+
+    threads = [t for t in qapp.findChildren(QThread) if t.isRunning()]
+    workers = [w for w in list(Worker.running) if w.is_running()]
+    assert not left, f"test left widgets open: {[type(w).__name__ for w in left]}"
+    assert not threads and not workers, f"test left {len(threads) + len(workers)} worker thread(s) running"
+
+
+@pytest.fixture
+def workspace(qapp, qtbot, no_qt_leaks, tmp_path):
+    """A fresh, shown registration workspace with its own QSettings; shut down after the test."""
+    from PySide6.QtCore import QSettings
+
+    from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
+
+    for fmt in (QSettings.Format.NativeFormat, QSettings.Format.IniFormat):
+        QSettings.setPath(fmt, QSettings.Scope.UserScope, str(tmp_path / "qsettings"))
+    w = RegistrationWorkspace()
+    w.resize(1300, 850)
+    w.show()
+    yield w
+    w.shutdown()
+    w.close()
+    w.deleteLater()
+
+
+@pytest.fixture
+def registered_workspace(workspace, demo_registered):
+    """:func:`workspace` showing the cached demo registration (no worker runs)."""
+    loaded, reg = workspace_session_outputs(demo_registered)
+    workspace.session.apply_loaded(loaded)
+    workspace._registered(reg)
+    return workspace

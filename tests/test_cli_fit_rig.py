@@ -165,8 +165,8 @@ def test_recording_create_round_trip_and_register(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("make, words", [
-    (lambda lab: ["--image", f"ir={lab / 'missing.png'}"], "file not found"),
-    (lambda lab: ["--image", f"ir={lab / 'notes.png'}"], "not a readable image"),
+    (lambda lab: ["--image", f"ir={lab / 'missing.png'}"], "not found"),
+    (lambda lab: ["--image", f"ir={lab / 'notes.png'}"], "not a PNG file"),
     (lambda lab: ["--image", "ir"], "NAME=FILE"),
     (lambda lab: ["--image", f"ir={lab / 'IR_0001.npy'}", "--image", f"ir={lab / 'IR_0001.npy'}"], "given twice"),
     (lambda lab: ["--depth", str(lab / "RGB_0001.png")], "single-channel"),

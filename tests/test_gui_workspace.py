@@ -89,8 +89,14 @@ def test_gui_thread_responsive_during_registration(ws):
     # the registration of the demo takes seconds; the GUI thread must keep ticking
     assert ws.register_seconds > 0.3, "registration too short to measure latency"
     assert ws.probe.ticks >= 0.3 * ws.register_seconds / 0.02
-    print(f"registration {ws.register_seconds:.2f} s, max event-loop gap {ws.probe.max_gap * 1000:.0f} ms")
-    assert ws.probe.max_gap < 0.5
+    # 200 ms on an idle machine, in proportion to the load per core: on an overloaded 2-core
+    # machine the GUI thread waits for a CPU (see test_gui_session.py for the same tolerance)
+    import os
+
+    limit = 0.2 * max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1))
+    print(f"registration {ws.register_seconds:.2f} s, max event-loop gap {ws.probe.max_gap * 1000:.0f} ms "
+          f"(limit {limit * 1000:.0f} ms)")
+    assert ws.probe.max_gap < limit
 
 
 def test_side_by_side_shows_display_rendering_of_registered_arrays(ws):
@@ -101,7 +107,10 @@ def test_side_by_side_shows_display_rendering_of_registered_arrays(ws):
     assert ws.current_view() == "side-by-side"
     assert set(ws.sbs_grid.views) == set(r.registered) | {"depth"}
     for cam, arr in r.registered.items():
-        expected = display.to_rgb8(arr, modality=ws.rig.camera(cam).modality)
+        # a cube is drawn with its raw cube's PCA basis (the same colour raw and registered)
+        raw = ws.recording.images[cam]
+        pca = display.fit_pca(raw) if raw.ndim == 3 and raw.shape[2] > 4 else None
+        expected = display.to_rgb8(arr, modality=ws.rig.camera(cam).modality, pca=pca)
         np.testing.assert_array_equal(ws.sbs_grid.views[cam].view.displayed(), expected)
     z_mm = r.points_rig[..., 2] * 1000
     np.testing.assert_array_equal(ws.sbs_grid.views["depth"].view.displayed(),
@@ -320,12 +329,13 @@ def test_export_dialog_needs_a_folder_and_a_part(qapp, tmp_path):
     nothing ticked would write an empty folder: Export stays disabled until both are given."""
     from PySide6.QtWidgets import QDialogButtonBox
 
-    from plantreg_gui.gui.registration.export_dialog import PARTS, ExportDialog
+    from plantreg_gui.core.export import OUTPUTS
+    from plantreg_gui.gui.registration.export_dialog import ExportDialog
 
     dlg = ExportDialog(tmp_path / "out")
     ok = dlg.buttons.button(QDialogButtonBox.StandardButton.Ok)
     try:
-        assert ok.isEnabled() and dlg.what() == list(PARTS)
+        assert ok.isEnabled() and dlg.what() == list(OUTPUTS)  # every core output is offered
         dlg.folder.setText("   ")
         assert not ok.isEnabled()
         dlg.folder.setText(str(tmp_path / "out2"))
@@ -360,7 +370,7 @@ def test_registering_another_target_reuses_the_registrar(ws, qapp):
 
 
 def test_cancel_registration(ws, qapp):
-    ws.registrar = None  # rebuild the meshes: long enough to cancel
+    ws.session.registrar = None  # rebuild the meshes: long enough to cancel
     before = ws.result
     ws.run_registration("ir")
     assert ws.is_busy()
@@ -397,7 +407,7 @@ def test_worker_error_becomes_a_dialog(qapp, demo_dir, tmp_path):
 
 # ---------------------------------------------------------------------- Plant3DImageReg
 def test_plant3d_reader_and_nominal_optics(shared_data):
-    from plantreg_gui.gui.registration import plant3d
+    from plantreg_gui.core import plant3d
 
     folder = shared_data / "plant3dimagereg"
     plants = plant3d.list_plants(folder)
@@ -459,6 +469,7 @@ def test_load_demo_writes_opens_and_registers(qapp, demo_dir, monkeypatch):
     """``--demo``: the demo is written on a worker (here copied from the session's demo to save
     time), opened, and registered into the requested target; busy until all of it is done."""
     import plantreg_gui.core.synthetic as synthetic
+    import plantreg_gui.gui.registration.session as session_module
     from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
 
     calls = []
@@ -469,6 +480,7 @@ def test_load_demo_writes_opens_and_registers(qapp, demo_dir, monkeypatch):
         return {"rig": Path(folder) / "rig.json", "recording": Path(folder) / "recording"}
 
     monkeypatch.setattr(synthetic, "write_demo", fake_write_demo)
+    monkeypatch.setattr(session_module, "DEMO_IN_PROCESS", False)  # the fake lives in this process
     w = RegistrationWorkspace()
     w.show()
     try:

@@ -17,6 +17,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from . import modality as _modality
+
 #: Iteration criteria for undistortion: OpenCV's default (5 iterations) leaves errors of
 #: tenths of a pixel near the border of strongly distorted lenses.
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
@@ -175,4 +177,5 @@ class Camera:
         v.check_rotation(R, key)
         v.check_translation(t, key)
         extra = {k: val for k, val in d.items() if k not in cls._KNOWN}
-        return cls(name, modality, width, height, K, dist if dist.size else np.zeros(5), R, t, extra)
+        # canonical modality name ('visible' -> 'rgb', 'lwir' -> 'thermal'): nothing downstream re-interprets it
+        return cls(name, _modality.canonical(modality), width, height, K, dist if dist.size else np.zeros(5), R, t, extra)

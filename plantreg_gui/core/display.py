@@ -14,51 +14,29 @@ Cubes with other band counts are shown as PCA false colour or as three chosen ba
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import Mapping, Sequence
 
 import cv2
 import numpy as np
 
-from .register import AREA_NAMES, CASE_NAMES
+from . import cases
+from . import modality as _modality
+from .cases import AREA_NAMES, CASE_NAMES
 
 #: Colour of pixels without a value (NaN): a neutral dark grey.
 BACKGROUND_RGB: tuple[int, int, int] = (28, 28, 28)
 
-#: Default colour map per modality (matplotlib names).
-DEFAULT_CMAPS: dict[str, str] = {
-    "thermal": "RdBu_r",        # diverging blue-white-red like the paper's thermal figures
-    "infrared": "gray",
-    "depth": "viridis",
-    "hyperspectral": "gray",    # a single band of a cube
-}
+#: Default colour map per canonical modality (matplotlib names), from :mod:`.modality`.
+DEFAULT_CMAPS: dict[str, str] = {m.name: m.cmap for m in _modality.MODALITIES}
 
-_MODALITY_ALIASES = {
-    "ir": "infrared", "nir": "infrared", "tof": "infrared", "amplitude": "infrared",
-    "color": "rgb", "colour": "rgb", "bgr": "rgb",
-    "hsi": "hyperspectral", "multispectral": "hyperspectral", "spectral": "hyperspectral",
-    "temperature": "thermal", "lwir": "thermal",
-}
+#: Case-map and area-map overlay colours (code -> RGB), from :mod:`.cases`; codes without an
+#: overlay (P1, P6 background) are absent.
+CASE_COLOURS: dict[int, tuple[int, int, int]] = dict(cases.CASE_COLOURS)
+AREA_COLOURS: dict[int, tuple[int, int, int]] = dict(cases.AREA_COLOURS)
 
-#: Case-map overlay colours (code -> RGB), the paper's: P2 cyan, P3.1 yellow, P3.2 magenta;
-#: P5 orange (our choice); "outside the source" grey. P1 and P6 background have no overlay.
-CASE_COLOURS: dict[int, tuple[int, int, int]] = {
-    2: (0, 255, 255),      # P2 occluded
-    3: (255, 255, 0),      # P3.1 incoming uncertain
-    4: (255, 0, 255),      # P3.2 outgoing uncertain
-    5: (255, 140, 0),      # P5 uncertain area (no object behind)
-    6: (128, 128, 128),    # hit outside the source image / behind the source camera
-}
-#: Optional colour for P1 (off by default: legitimate pixels need no mark).
-P1_COLOUR: tuple[int, int, int] = (255, 255, 255)
-
-#: Area-map overlay colours: P4 green, P5 orange; P6 certain background has no overlay.
-AREA_COLOURS: dict[int, tuple[int, int, int]] = {
-    4: (0, 255, 0),        # P4 certain object
-    5: (255, 140, 0),      # P5 uncertain object area
-}
-
-#: Legend labels per code (the same names as :mod:`.register`).
+#: Legend labels per code (the same names as :mod:`.cases`).
 CASE_LABELS: dict[int, str] = dict(CASE_NAMES)
 AREA_LABELS: dict[int, str] = dict(AREA_NAMES)
 
@@ -72,8 +50,8 @@ def legend(kind: str = "cases", colours: Mapping[int, tuple[int, int, int]] | No
 
 
 def canonical_modality(modality: str | None) -> str:
-    m = (modality or "").strip().lower()
-    return _MODALITY_ALIASES.get(m, m)
+    """The canonical modality name (kept for callers; the registry is :mod:`.modality`)."""
+    return _modality.canonical(modality)
 
 
 # ---------------------------------------------------------------------- statistics
@@ -209,12 +187,65 @@ def pca_scores(cube: np.ndarray, mask: np.ndarray | None = None, n: int = 3) -> 
     return out.reshape(H, W, n)
 
 
+@dataclass(frozen=True)
+class PcaBasis:
+    """A fitted PCA false colour: ``mean`` (B,), ``components`` (B, 3), ``limits`` per channel.
+    Rendering another cube of the same camera with it (e.g. the registered cube with the raw
+    cube's basis) gives the same colour to the same spectrum."""
+
+    mean: np.ndarray
+    components: np.ndarray
+    limits: tuple[tuple[float, float], ...]
+
+    def scores(self, cube: np.ndarray) -> np.ndarray:
+        """(H, W, B) -> (H, W, 3) float32 scores; NaN where any band is not finite."""
+        H, W, B = cube.shape
+        flat = np.asarray(cube).reshape(-1, B)
+        flat32 = flat if flat.dtype == np.float32 else flat.astype(np.float32)
+        V = self.components.astype(np.float32)
+        out = flat32 @ V - (self.mean.astype(np.float32) @ V)
+        if flat.dtype.kind == "f":
+            out[~np.isfinite(flat).all(axis=1)] = np.nan
+        return out.reshape(H, W, V.shape[1])
+
+
+def fit_pca(cube: np.ndarray, mask: np.ndarray | None = None,
+            percentiles: tuple[float, float] = (1, 99)) -> PcaBasis | None:
+    """The PCA false colour of ``cube`` (H, W, B) as :func:`pca_false_colour` draws it; None
+    when fewer than two pixels are finite."""
+    cube = np.asarray(cube)
+    B = cube.shape[2]
+    flat = cube.reshape(-1, B)
+    finite = np.isfinite(flat).all(axis=1) if cube.dtype.kind == "f" else np.ones(len(flat), bool)
+    fit = finite if mask is None else finite & np.asarray(mask, dtype=bool).ravel()
+    idx = np.flatnonzero(fit)
+    if idx.size < 2:
+        return None
+    idx = _sample(idx, max(2000, _MAX_SAMPLES // max(B, 1)))
+    X = flat[idx].astype(np.float64)
+    mean = X.mean(axis=0)
+    Xc = X - mean
+    w, V = np.linalg.eigh(Xc.T @ Xc / max(len(Xc) - 1, 1))
+    V = V[:, np.argsort(w)[::-1][:3]]
+    signs = np.sign(V[np.argmax(np.abs(V), axis=0), np.arange(V.shape[1])])
+    V = V * np.where(signs == 0, 1.0, signs)
+    if V.shape[1] < 3:
+        V = np.hstack([V, np.zeros((B, 3 - V.shape[1]))])
+    basis = PcaBasis(mean, V, ((0.0, 1.0),) * 3)
+    sc = basis.scores(cube)
+    limits = tuple(auto_limits(sc[:, :, c], percentiles, mask) for c in range(3))
+    return PcaBasis(mean, V, limits)
+
+
 def pca_false_colour(cube: np.ndarray, mask: np.ndarray | None = None,
-                     percentiles: tuple[float, float] = (1, 99)) -> np.ndarray:
-    """Cube (H, W, B) -> (H, W, 3) uint8: PC1 red, PC2 green, PC3 blue, each percentile-stretched.
+                     percentiles: tuple[float, float] = (1, 99), basis: PcaBasis | None = None) -> np.ndarray:
+    """Cube (H, W, B) -> (H, W, 3) uint8: PC1 red, PC2 green, PC3 blue, each percentile-stretched;
+    with ``basis``, that basis and its limits (see :class:`PcaBasis`).
 
     NaN pixels (any band non-finite) are drawn in :data:`BACKGROUND_RGB`.
     """
+    if basis is not None and basis.mean.shape[0] == cube.shape[2]:
+        return _stretch_channels(basis.scores(cube), percentiles, mask, basis.limits)
     scores = pca_scores(cube, mask, 3)
     return _stretch_channels(scores, percentiles, mask)
 
@@ -239,7 +270,8 @@ def _stretch_channels(img: np.ndarray, percentiles: tuple[float, float], mask: n
 # ---------------------------------------------------------------------- the entry point
 def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = None,
             limits: tuple[float, float] | None = None, percentiles: tuple[float, float] = (1, 99),
-            bands: tuple[int, int, int] | None = None, mask: np.ndarray | None = None) -> np.ndarray:
+            bands: tuple[int, int, int] | None = None, mask: np.ndarray | None = None,
+            pca: PcaBasis | None = None) -> np.ndarray:
     """Render any image for display: (H, W) or (H, W, C) -> (H, W, 3) uint8 RGB.
 
     * single band: colour map ``cmap`` (default by ``modality``, see :data:`DEFAULT_CMAPS`),
@@ -248,7 +280,8 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
     * three bands (and ``bands`` not given): RGB; uint8 shown as it is, other dtypes stretched
       with one pair of limits for all channels (keeps hues);
     * four bands with modality 'rgb': RGBA, alpha dropped;
-    * other band counts: PCA false colour, or ``bands=(r, g, b)`` band indices, each stretched.
+    * other band counts: PCA false colour (fitted here, or ``pca`` fitted on another cube of the
+      same camera by :func:`fit_pca`), or ``bands=(r, g, b)`` band indices, each stretched.
 
     ``mask`` (H, W) bool selects the pixels the statistics are taken from (e.g. the object);
     every pixel is still drawn. NaN pixels are drawn in :data:`BACKGROUND_RGB`.
@@ -264,16 +297,16 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
         out[img.index] = rgb.reshape(-1, 3)
         return out.reshape(img.shape[0], img.shape[1], 3)
     a = np.asarray(img)
-    mod = canonical_modality(modality)
+    mod = _modality.get(modality)
     if a.ndim == 3 and a.shape[2] == 1:
         a = a[:, :, 0]
     if a.ndim == 2:
-        if mod == "depth":
+        if mod.name == "depth":
             # depth 0 (or negative) means "no measurement", as in Recording.depth_m
             a = a.astype(np.float32)
             with np.errstate(invalid="ignore"):
                 a[~(a > 0)] = np.nan
-        name = cmap or DEFAULT_CMAPS.get(mod, "gray")
+        name = cmap or mod.cmap
         return colorize(a, name, limits, percentiles, mask)
     if a.ndim != 3:
         raise ValueError(f"expected an (H, W) or (H, W, C) image, got shape {a.shape}")
@@ -284,9 +317,9 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
             raise ValueError(f"bands must be three indices into {C} bands, got {bands}")
         sub = a[:, :, b]
         return _stretch_channels(sub, percentiles, mask, None if limits is None else [limits] * 3)
-    if C == 4 and mod == "rgb":
+    if C == 4 and mod.is_colour:
         a, C = a[:, :, :3], 3
-    if C == 3 and mod != "hyperspectral":
+    if C == 3 and not mod.is_cube:
         if a.dtype == np.uint8 and limits is None:
             return np.ascontiguousarray(a)
         lo, hi = limits if limits is not None else auto_limits(a, percentiles, mask)
@@ -297,7 +330,7 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
     if C == 2:
         # no natural colour for two bands: show the first, as a single band
         return colorize(a[:, :, 0], cmap or "gray", limits, percentiles, mask)
-    return pca_false_colour(a, mask, percentiles)
+    return pca_false_colour(a, mask, percentiles, pca)
 
 
 # ---------------------------------------------------------------------- overlays and comparisons

@@ -31,7 +31,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from .. import __version__
-from . import display
+from . import display, modality
 from .errors import InputError
 from .imageio import (TIFF_CODEC_DEFAULT, atomic_output_dir, atomic_path_suffixed, atomic_write_text,
                       dense_tiles, write_png, write_tiff_tiled)
@@ -82,6 +82,7 @@ def write_outputs(
     what: Iterable[str] | None = None,
     display_options: Mapping[str, Mapping[str, Any]] | None = None,
     tiff_codec: str = TIFF_CODEC_DEFAULT,
+    mosaic_tile: int | None = None,
 ) -> Path:
     """Write ``result`` into the folder ``out`` (layout in the module docstring); returns ``out``.
 
@@ -91,6 +92,8 @@ def write_outputs(
     arguments of :func:`display.to_rgb8` (cmap, limits, percentiles, bands) for the previews,
     the mosaic and the point-cloud colours, so an export looks like the GUI's view.
     ``tiff_codec``: the registered TIFFs' lossless compression (:data:`~.imageio.TIFF_CODECS`).
+    ``mosaic_tile`` the mosaic's tile size in pixels (default :func:`display.default_tile`; the
+    workspace passes its screen's tile).
 
     Raises :class:`InputError` if ``out`` exists and is not empty and ``overwrite`` is False;
     :class:`~plantreg_gui.core.errors.Cancelled` if cancelled through ``progress`` (nothing is
@@ -172,7 +175,7 @@ def write_outputs(
                           rep.sub(done / total, (done + weight) / total))
             elif kind == "mosaic":
                 rel = "mosaic.png"
-                write_png(tmp / rel, display.mosaic([preview(c) for c in cams], display.default_tile((H, W))))
+                write_png(tmp / rel, display.mosaic([preview(c) for c in cams], mosaic_tile or display.default_tile((H, W))))
             else:  # pragma: no cover - steps are built above
                 raise AssertionError(step)
             timings[kind] = timings.get(kind, 0.0) + time.perf_counter() - t0
@@ -515,7 +518,7 @@ def _colour_camera(result: RegistrationResult, rig: Rig) -> str | None:
     """The camera whose display rendering colours the point cloud: the rgb camera, else the target
     (None when no camera has an image)."""
     for c in rig.cameras:
-        if display.canonical_modality(c.modality) == "rgb" and c.name in result.registered:
+        if modality.is_colour(c.modality) and c.name in result.registered:
             return c.name
     if result.target in result.registered:
         return result.target

@@ -78,6 +78,11 @@ class Reporter:
             _timings=self.timings,
         )
 
+    def timed(self, timings: dict[str, float]) -> "Reporter":
+        """This reporter (same span, callback and cancellation) recording stage times into
+        ``timings`` instead of its own table (e.g. one table per registration)."""
+        return Reporter(self.callback, self.cancel, _span=self._span, _timings=timings)
+
     @contextmanager
     def stage(self, name: str, start: float = 0.0, end: float | None = None) -> Iterator[None]:
         """Time a named stage; reports ``name`` at ``start`` (and at ``end`` if given)."""

@@ -26,6 +26,10 @@ from .camera import Camera
 #: Rays per Open3D call: bounds the temporaries (cast_rays returns ~40 bytes per ray).
 RAY_CHUNK = 1 << 20
 
+#: Open3D's ray casting holds the GIL for a whole call (1M rays ~ 0.5-1.3 s), which freezes the GUI
+#: thread while a worker registers; calls are split so that none holds it for more than ~40 ms.
+GIL_CHUNK = 1 << 15
+
 #: Largest acceptable error of the interpolated undistortion, pixels.
 _UNDISTORT_TOL_PX = 1e-4
 
@@ -245,10 +249,10 @@ class MeshScene:
         if self.n_triangles == 0 or n == 0:
             return Hits(t, prim)
         origins = np.asarray(origins, dtype=np.float32)
-        for a in range(0, n, chunk):
-            if check is not None:
+        for a in range(0, n, min(chunk, GIL_CHUNK)):
+            if check is not None and a % chunk < GIL_CHUNK:
                 check()  # cancellation point per chunk
-            b = min(n, a + chunk)
+            b = min(n, a + min(chunk, GIL_CHUNK))
             o = origins if origins.ndim == 1 else origins[a:b]
             r = self.scene.cast_rays(self._rays(o, dirs[a:b]))
             t[a:b] = r["t_hit"].numpy()
@@ -268,10 +272,10 @@ class MeshScene:
         if self.n_triangles == 0 or n == 0:
             return out
         origins = np.asarray(origins, dtype=np.float32)
-        for a in range(0, n, chunk):
-            if check is not None:
+        for a in range(0, n, min(chunk, GIL_CHUNK)):
+            if check is not None and a % chunk < GIL_CHUNK:
                 check()  # cancellation point per chunk
-            b = min(n, a + chunk)
+            b = min(n, a + min(chunk, GIL_CHUNK))
             o = origins if origins.ndim == 1 else origins[a:b]
             out[a:b] = self.scene.test_occlusions(self._rays(o, dirs[a:b]), tnear=0.0, tfar=float(tfar)).numpy()
         return out

@@ -41,9 +41,9 @@ class Recording:
             raise InputError("the recording has no depth map", self.folder)
         if self.depth_scale is not None:
             scale = self.depth_scale
-        d = self.depth.astype(np.float32) * np.float32(scale)
-        d[~(d > 0)] = np.nan
-        return d
+        from .depth import to_metres
+
+        return to_metres(self.depth, scale)
 
     @classmethod
     def load(cls, folder: str | Path, rig: Rig | None = None) -> "Recording":

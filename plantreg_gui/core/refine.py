@@ -55,7 +55,7 @@ from .errors import InputError
 from .progress import Reporter, ensure_reporter
 from .raycast import pixel_rays_cam, project_points
 from .recording import Recording
-from .register import Meshes, RegistrationParams, build_meshes, transport_pixels
+from .register import Meshes, RegistrationParams, build_meshes, filter_depth, transport_pixels
 from .rig import Rig
 
 #: what ``free`` may contain (other names are accepted by the caller's landmark fit, not here)
@@ -75,7 +75,7 @@ class RefineParams:
     levels_deg: tuple[float, ...] = (1.6, 0.8, 0.4, 0.2, 0.0)
     min_sigma_px: float = 0.8
     bins: int = 24                      # histogram bins per axis
-    max_points: int = 6000             # per recording at the finest level
+    max_points: int = 15000            # per recording at the finest level (6000 was measured too few for thermal)
     min_points: int = 3000              # per recording at the coarsest level
     candidates: int = 8                 # depth points considered per recording, in multiples of max_points
     bound_units: float = 5.0            # search box per level, +- blur widths
@@ -89,10 +89,11 @@ class RefineParams:
     restarts: int = 2                   # Powell restarts when it runs out of evaluations
     #: converged only if the chance NID minus the result's NID is at least this
     min_information: float = 0.01
-    #: ... and moving the image by ``probe_px`` either way in x and y raises the NID by at least this
-    #: fraction of that information (measured on the demo: 0.03 thermal, whose image is smooth, to 0.2)
+    #: ... and moving the image by max(``probe_px``, 1 % of its diagonal) either way in x and y raises
+    #: the NID by at least this fraction of that information
     min_contrast: float = 0.01
-    probe_px: float = 3.0
+    probe_px: float = 3.0               # at least this, or probe_frac of the image diagonal
+    probe_frac: float = 0.01
     #: landmark disagreement (median px) above which a warning is given
     landmark_warn_px: float = 3.0
     #: ... and if the landmarks agreed better with the start pose, keep the start pose
@@ -290,7 +291,11 @@ class _Level:
 def _prepare_recording(rig: Rig, rec: Recording, rays_cam: np.ndarray, p: RefineParams,
                        rng: np.random.Generator) -> _RecData:
     dcam = rig.depth()
-    depth = rec.depth_m(rig.depth_scale)
+    depth_raw = rec.depth_m(rig.depth_scale)
+    rp = RegistrationParams(occlusion_tol_m=p.occlusion_tol_m)
+    # the registration's ToF clean-up (flying pixels, same-surface denoising): points on the
+    # surfaces the meshes are built from, so that a point does not hide behind its own surface
+    depth, _flying = filter_depth(depth_raw, rp)
     H, W = depth.shape
     # mixed pixels: a large depth range in the 3x3 neighbourhood (or a neighbour without depth)
     big = np.where(np.isfinite(depth), depth, np.float32(np.inf))
@@ -308,8 +313,7 @@ def _prepare_recording(rig: Rig, rec: Recording, rays_cam: np.ndarray, p: Refine
         ref = _single_channel(rec.images[rig.depth_camera])
     else:
         ref = np.nan_to_num(depth, nan=float(np.nanmax(depth)) if np.isfinite(depth).any() else 0.0)
-    rp = RegistrationParams(occlusion_tol_m=p.occlusion_tol_m)
-    meshes = build_meshes(rig, depth, rp, rays_cam=rays_cam)
+    meshes = build_meshes(rig, depth_raw, rp, rays_cam=rays_cam)
     return _RecData(X_rig, pix, ref, meshes)
 
 
@@ -628,7 +632,9 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
     nid_c, tot_c = _nid_per_recording(lv, cam, shuffled)
     chance_cost = float(np.dot(tot_c, nid_c) / tot_c.sum())
     information = chance_cost - end_cost
-    probe = _Param(cam, p.probe_px, par.zm, False)
+    # the probe scales with the image (a smooth thermal image changes little over 3 px)
+    probe_px = max(p.probe_px, p.probe_frac * float(np.hypot(cam.width, cam.height)))
+    probe = _Param(cam, probe_px, par.zm, False)
     shifted = [_cost(lv, probe.camera(np.eye(6)[k] * sgn))[0] for k in (0, 1) for sgn in (-1, 1)]
     contrast = (min(shifted) - end_cost) / max(information, 1e-3)
     converged = bool(res.success) and not on_bound and information >= p.min_information and contrast >= p.min_contrast
@@ -641,7 +647,7 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
         if information < p.min_information:
             why.append(f"the images share almost no information (NID {end_cost:.3f} vs chance {chance_cost:.3f})")
         elif contrast < p.min_contrast:
-            why.append(f"the cost has no clear minimum (moving {p.probe_px:g} px changes it by only "
+            why.append(f"the cost has no clear minimum (moving {probe_px:.0f} px changes it by only "
                        f"{contrast * 100:.0f} % of the information)")
         warn.append(f"{name}: did not converge ({'; '.join(why)}); keep the start pose or check the images")
     dR = cam.R_cam_rig @ cam0.R_cam_rig.T

@@ -43,6 +43,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from .camera import Camera
+from .cases import AREA_NAMES, CASE_NAMES, Area, Case  # noqa: F401 (re-exported)
 from .errors import InputError
 from .mesh import TriMesh, extend_boundary, object_mesh, uncertainty_mesh
 from .progress import Reporter, ensure_reporter
@@ -50,14 +51,10 @@ from .raycast import RAY_CHUNK, MeshScene, pixel_rays_cam, pixel_rays_rig, proje
 from .recording import Recording
 from .rig import Rig
 
-CASE_BACKGROUND, CASE_P1, CASE_P2, CASE_P31, CASE_P32, CASE_P5, CASE_OUTSIDE = 0, 1, 2, 3, 4, 5, 6
-AREA_P4, AREA_P5, AREA_P6 = 4, 5, 6
-
-CASE_NAMES = {
-    0: "P6 background", 1: "P1 legitimate", 2: "P2 occluded", 3: "P3.1 incoming uncertain",
-    4: "P3.2 outgoing uncertain", 5: "P5 uncertain area", 6: "outside source",
-}
-AREA_NAMES = {4: "P4 certain object", 5: "P5 uncertain object", 6: "P6 certain background"}
+# the codes are defined once in .cases; these names stay importable from here
+CASE_BACKGROUND, CASE_P1, CASE_P2, CASE_P31, CASE_P32, CASE_P5, CASE_OUTSIDE = (
+    Case.BACKGROUND, Case.P1, Case.P2, Case.P31, Case.P32, Case.P5, Case.OUTSIDE)
+AREA_P4, AREA_P5, AREA_P6 = Area.P4, Area.P5, Area.P6
 
 
 @dataclass
@@ -299,14 +296,10 @@ def _flying_in_roi(dcam: Camera, flying: np.ndarray, depth_m: np.ndarray, lo: np
 
 @contextmanager
 def _stage(progress: Reporter, timings: dict[str, float], name: str, start: float, end: float) -> Iterator[None]:
-    """Report ``name`` at ``start`` (a cancellation point), time it into ``timings``, report ``end``."""
-    progress(start, name)
-    t0 = time.perf_counter()
-    try:
+    """Report ``name`` at ``start`` (a cancellation point), time it into ``timings``, report ``end``
+    (:meth:`Reporter.stage`, the one timing mechanism, with this registration's own table)."""
+    with progress.timed(timings).stage(name, start, end):
         yield
-    finally:
-        timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
-    progress(end, name)
 
 
 def _segment_dirs(origin: np.ndarray, points: np.ndarray, stop_before_m: float) -> tuple[np.ndarray, np.ndarray]:

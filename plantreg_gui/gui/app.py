@@ -27,6 +27,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--calibrate-demo", action="store_true", help="open the synthetic calibration session of the demo")
     g.add_argument("--session", type=Path, help="open a capture session folder in the calibration wizard")
     g.add_argument("--page", type=int, help="wizard page to show (1-7); earlier pages' work is run first")
+    g = p.add_argument_group("landmark page")
+    g.add_argument("--landmarks", type=Path, help="open the landmark page on this landmarks file (with --rig; "
+                   "--recording adds a recording folder)")
     g = p.add_argument_group("automation")
     g.add_argument("--screenshot", type=Path, help="save a PNG of the window once the work is done, then exit")
     g.add_argument("--size", default="1500x950", help="window size WxH (default 1500x950)")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -30,11 +31,22 @@ class MainWindow(QMainWindow):
         self.wizard = CalibrationWizard(self)
         self.tabs.addTab(self.workspace, "Registration")
         self.tabs.addTab(self.wizard, "Calibration")
+        from .landmarks.page import LandmarkPage
+
+        self.landmarks = LandmarkPage(self)
+        self.tabs.addTab(self.landmarks, "Landmarks")
         self.statusBar()
 
     # ------------------------------------------------------------------ start options
     def apply_start_options(self, args) -> None:
-        if args.calibrate_demo or args.session:
+        if getattr(args, "landmarks", None):
+            if not args.rig:
+                from ..core.errors import InputError
+
+                raise InputError("--landmarks needs --rig (the start rig)")
+            self.tabs.setCurrentWidget(self.landmarks)
+            self.landmarks.open(args.rig, args.landmarks, [args.recording] if args.recording else None)
+        elif args.calibrate_demo or args.session:
             self.tabs.setCurrentWidget(self.wizard)
             if args.calibrate_demo:
                 self.wizard.load_demo()
@@ -57,17 +69,20 @@ class MainWindow(QMainWindow):
                 self.workspace.set_view(args.view)
 
     def is_busy(self) -> bool:
-        return self.workspace.is_busy() or self.wizard.is_busy()
+        return self.workspace.is_busy() or self.wizard.is_busy() or self.landmarks.is_busy()
 
     def busy_for_screenshot(self) -> bool:
         """Busy with work the shown view needs (the wizard's page 1 does not wait for detection)."""
-        return self.workspace.is_busy() or self.wizard.page_busy()
+        return self.workspace.is_busy() or self.wizard.page_busy() or self.landmarks.is_busy()
 
     # ------------------------------------------------------------------ screenshots
     def screenshot_when_idle(self, path: Path, timeout: float) -> None:
         """Poll until no view is busy (and stays idle briefly), then grab the window and quit."""
+        from .workers import SHOWN_ERRORS
+
         t0 = time.monotonic()
         state = {"idle_since": None}
+        n_errors = len(SHOWN_ERRORS)
 
         def tick() -> None:
             now = time.monotonic()
@@ -81,7 +96,10 @@ class MainWindow(QMainWindow):
                 return
             timer.stop()
             self.save_screenshot(path)
-            QApplication.instance().exit(0 if now - t0 < timeout else 3)
+            errors = SHOWN_ERRORS[n_errors:]
+            for title, msg in errors:  # shown in a dialog nobody will see: say it and fail
+                print(f"plantreg-gui: error: {title}: {msg}", file=sys.stderr)
+            QApplication.instance().exit(1 if errors else 0 if now - t0 < timeout else 3)
 
         timer = QTimer(self)
         timer.timeout.connect(tick)
@@ -100,6 +118,25 @@ class MainWindow(QMainWindow):
         print(f"screenshot saved to {path}")
 
     def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
-        for w in (self.workspace, self.wizard):
+        for w in (self.workspace, self.wizard, self.landmarks):
             w.shutdown()
         super().closeEvent(event)
+
+    def show_landmarks(self, rig_path: Path | None, recording: Path | None) -> None:
+        """The workspace's File ▸ "Fit rig from landmarks…": the landmark page on its rig and recording."""
+        from PySide6.QtWidgets import QFileDialog
+
+        from ..core.errors import PlantregError
+        from .workers import show_error
+
+        self.tabs.setCurrentWidget(self.landmarks)
+        if rig_path is None:
+            return
+        lm, _ = QFileDialog.getSaveFileName(self, "Landmarks file (new or existing)",
+                                            str(Path(rig_path).parent / "landmarks.json"), "Landmarks (*.json)",
+                                            options=QFileDialog.Option.DontConfirmOverwrite)
+        if lm:
+            try:
+                self.landmarks.open(rig_path, lm, [recording] if recording else None)
+            except PlantregError as e:
+                show_error(self, "Cannot open", str(e))

@@ -8,7 +8,10 @@ on the GUI thread; :func:`show_error` is the one place where errors become dialo
 
 from __future__ import annotations
 
+import importlib
+import threading
 import traceback
+import weakref
 from typing import Any, Callable
 
 from PySide6.QtCore import QObject, QThread, Signal, Slot
@@ -16,6 +19,24 @@ from PySide6.QtWidgets import QMessageBox, QWidget
 
 from ..core.errors import Cancelled, PlantregError
 from ..core.progress import CancelToken, Reporter
+
+
+#: Modules the GUI will need later that are slow to import (e.g. VTK for the 3D view): the first
+#: worker job imports them on its thread, before its own work, so the GUI thread does not. Under
+#: a lock, so that no two threads import them at the same time (concurrent imports of
+#: interdependent modules can deadlock: Python raises _DeadlockError in one of them).
+PREIMPORT: list[str] = []
+_PREIMPORT_LOCK = threading.Lock()
+
+
+def _preimport() -> None:
+    with _PREIMPORT_LOCK:
+        while PREIMPORT:
+            name = PREIMPORT.pop(0)
+            try:
+                importlib.import_module(name)
+            except Exception:  # noqa: BLE001 - the view that needs it reports the failure itself
+                pass
 
 
 class _Runner(QObject):
@@ -32,6 +53,7 @@ class _Runner(QObject):
     def run(self) -> None:
         reporter = Reporter(lambda f, m: self.progress.emit(f, m), self._token)
         try:
+            _preimport()
             result = self._fn(*self._args, progress=reporter, **self._kwargs)
         except Cancelled:
             self.cancelled.emit()
@@ -72,8 +94,12 @@ class Worker(QObject):
         self._runner.cancelled.connect(self._on_cancelled)
         self._running = False
 
+    #: workers whose thread has started and not yet ended (for leak checks in tests)
+    running: "weakref.WeakSet[Worker]" = weakref.WeakSet()
+
     def start(self) -> "Worker":
         self._running = True
+        Worker.running.add(self)
         self._thread.start()
         return self
 
@@ -95,6 +121,7 @@ class Worker(QObject):
 
     def _end(self) -> None:
         self._running = False
+        Worker.running.discard(self)
         self._thread.quit()
         self._thread.wait()
         self.done.emit()
@@ -121,8 +148,14 @@ class Worker(QObject):
         self._end()
 
 
+#: (title, message) of every error shown: an unattended ``--screenshot`` run reports them and
+#: fails instead of exiting 0 with a dialog nobody sees.
+SHOWN_ERRORS: list[tuple[str, str]] = []
+
+
 def show_error(parent: QWidget | None, title: str, message: str, details: str = "") -> None:
     """The one place where errors become dialogs (non-modal-safe: uses open() under tests)."""
+    SHOWN_ERRORS.append((title, message))
     box = QMessageBox(QMessageBox.Icon.Warning, title, message, QMessageBox.StandardButton.Ok, parent)
     if details:
         box.setDetailedText(details)

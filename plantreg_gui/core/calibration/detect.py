@@ -38,6 +38,7 @@ from typing import Any, Iterator
 import cv2
 import numpy as np
 
+from .. import modality as _modality
 from ..errors import InputError
 from ..imageio import read_image
 from ..progress import Reporter, ensure_reporter
@@ -244,7 +245,7 @@ def detect_image(image: np.ndarray, board: Board, options: DetectOptions | None 
     (status ``found`` or ``failed`` with a reason). ``modality`` only matters when
     ``options.invert`` is None (thermal -> inverted polarity)."""
     options = options or DetectOptions()
-    inverted = options.invert if options.invert is not None else str(modality or "").lower() == "thermal"
+    inverted = options.invert if options.invert is not None else _modality.inverted_board(modality)
     img = np.asarray(image)
     size = (int(img.shape[1]), int(img.shape[0]))
     gray = to_gray(img, options.enhance)

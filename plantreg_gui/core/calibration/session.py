@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .. import modality
 from ..errors import InputError
 from ..imageio import IMAGE_SUFFIXES, atomic_write_text, read_json
 from .board import Board
@@ -30,9 +31,9 @@ from .board import Board
 SESSION_FILE = "session.json"
 DEPTH_STEM = "depth"
 
-#: Detection polarity default per modality: a heated board seen by a thermal camera glows where
-#: the print is black, so the image is a photographic negative of the board.
-INVERTED_MODALITIES = ("thermal",)
+#: Detection polarity default per modality (``Modality.inverted_board``): a heated board seen by
+#: a thermal camera glows where the print is black, so the image is a photographic negative.
+INVERTED_MODALITIES = tuple(m.name for m in modality.MODALITIES if m.inverted_board)
 
 
 
@@ -125,7 +126,7 @@ class Session:
 
     def default_inverted(self, camera: str) -> bool:
         """The board polarity assumed for ``camera`` when not set: inverted for thermal cameras."""
-        return str(self.cameras.get(camera, "")).lower() in INVERTED_MODALITIES
+        return modality.inverted_board(self.cameras.get(camera))
 
     # ------------------------------------------------------------------ review state
     def excluded(self) -> set[tuple[str, str]]:
@@ -200,7 +201,7 @@ class Session:
                 raise InputError(f"camera '{name}' must be an object {{\"modality\": ...}}", path)
             if ":" in str(name) or str(name) == DEPTH_STEM:
                 raise InputError(f"camera name '{name}' is not allowed (no ':' and not '{DEPTH_STEM}')", path)
-            cameras[str(name)] = str(c.get("modality", "unknown"))
+            cameras[str(name)] = modality.canonical(str(c.get("modality", "unknown")))
             meta = camera_meta_from_dict(c, f"camera '{name}'", path)
             if meta:
                 camera_meta[str(name)] = meta
@@ -259,7 +260,8 @@ class Session:
         if depth_camera is not None and depth_camera not in cameras:
             raise InputError(f"depth camera '{depth_camera}' is not among the cameras ({', '.join(cameras)})", folder)
         folder.mkdir(parents=True, exist_ok=True)
-        s = cls(folder, board, dict(cameras), depth_camera, float(depth_scale), [], {})
+        cameras = {n: modality.canonical(m) for n, m in cameras.items()}
+        s = cls(folder, board, cameras, depth_camera, float(depth_scale), [], {})
         s.save()
         s.rescan()
         return s

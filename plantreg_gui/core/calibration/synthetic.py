@@ -32,6 +32,7 @@ from ..imageio import atomic_output_dir, atomic_write_text, write_png, write_tif
 from ..progress import Reporter, ensure_reporter
 from ..rig import Rig
 from .board import Board
+from .. import modality as _modality
 from .session import SESSION_FILE
 
 TRUTH_FILE = "truth.json"
@@ -41,14 +42,11 @@ MIN_SQUARE_PX = 6.0
 
 # ---------------------------------------------------------------------- helpers
 def _kind(modality: str) -> str:
-    m = modality.lower()
-    if "therm" in m:
-        return "thermal"
-    if "hyper" in m or "spectral" in m:
-        return "hyperspectral"
-    if m in ("ir", "nir", "infrared", "depth") or "infra" in m:
-        return "infrared"
-    return "visible"
+    """How a camera of this modality sees the board: 'visible', 'infrared', 'thermal' or 'hyperspectral'."""
+    m = _modality.canonical(modality)
+    if m in ("thermal", "hyperspectral", "infrared"):
+        return m
+    return "infrared" if m == "depth" else "visible"
 
 
 def _rot(axis: str, deg: float) -> np.ndarray:
@@ -449,5 +447,5 @@ def example_rig() -> Rig:
     cams.append(Camera("thermal", "thermal", 640, 480, K(900.0, 640, 480, 4.0, 2.0), [-0.12, 0.2, 0.0, 0.0, 0.0], R, t))
     R, t = look_at([0.10, 0.05, 0.012], (0.0, 0.0, 0.75), 1.1)
     cams.append(Camera("hyperspectral", "hyperspectral", 256, 256, K(420.0, 256, 256, 1.5, -2.0), [-0.05, 0.02, 0, 0, 0], R, t,
-                       extra={"bands": 8}))
+                       extra={"bands": [400.0 + 600.0 * k / 7 for k in range(8)]}))  # 8 band centres, nm
     return Rig(cams, "ir", 0.001, np.array([-0.5, -0.5, 0.3]), np.array([0.5, 0.5, 1.2]))

@@ -112,10 +112,14 @@ class Scene:
         dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
         o = np.broadcast_to(np.asarray(origins, dtype=np.float64), dirs.shape)
         rays = np.concatenate([o, dirs], axis=1).astype(np.float32)
-        ans = self.raycasting_scene().cast_rays(o3d.core.Tensor(rays))
-        t = ans["t_hit"].numpy().astype(np.float64)
-        prim = ans["primitive_ids"].numpy().astype(np.int64)
-        bary = ans["primitive_uvs"].numpy().astype(np.float64)
+        n = len(rays)
+        t, prim, bary = np.empty(n), np.empty(n, np.int64), np.empty((n, 2))
+        step = 1 << 15  # Open3D holds the GIL for a whole call: short calls keep a GUI responsive
+        for a in range(0, n, step):
+            ans = self.raycasting_scene().cast_rays(o3d.core.Tensor(rays[a:a + step]))
+            t[a:a + step] = ans["t_hit"].numpy()
+            prim[a:a + step] = ans["primitive_ids"].numpy()
+            bary[a:a + step] = ans["primitive_uvs"].numpy()
         miss = ~np.isfinite(t)
         prim[miss] = -1
         return t, prim, bary

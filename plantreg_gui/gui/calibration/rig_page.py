@@ -11,6 +11,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDoubleSpinBox, QFi
                                QGroupBox, QHBoxLayout, QHeaderView, QLabel, QLineEdit, QPushButton,
                                QSizePolicy, QSpinBox, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget)
 
+from ...core import modality
 from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
@@ -383,6 +384,7 @@ class RigPage(WizardPage):
         s = self.model.session
         if s is None or board is None:
             return False
+        cams = {n: modality.canonical(m) for n, m in cams.items()}  # the session holds canonical names
         return (board.to_dict() != s.board.to_dict() or cams != s.cameras or depth != s.depth_camera
                 or (depth is not None and abs(scale - s.depth_scale) > 1e-12)
                 or self.camera_meta()[0] != {n: m for n, m in s.camera_meta.items() if m})

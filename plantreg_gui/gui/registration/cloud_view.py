@@ -13,9 +13,16 @@ from PySide6.QtWidgets import (
     QCheckBox, QComboBox, QHBoxLayout, QLabel, QSpinBox, QSplitter, QVBoxLayout, QWidget,
 )
 
+from ..workers import PREIMPORT
 from .model import Cloud
 
 MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
+
+
+# pyvista/VTK take 1-5 s to import; imported on the GUI thread when the 3D tab was first opened
+# they froze it. The first worker job imports them instead (see workers.PREIMPORT).
+if "pyvistaqt" not in PREIMPORT:
+    PREIMPORT.append("pyvistaqt")
 
 
 class CloudView(QWidget):
@@ -226,6 +233,46 @@ class CloudView(QWidget):
         self.picked_index = int(i)
         self.info.setText(self.cloud.point_text(int(i)))
         return int(i)
+
+    def show_point(self, i: int) -> None:
+        """Read out cloud point ``i`` (no KD tree needed: for a known target pixel)."""
+        self.picked_index = int(i)
+        self.info.setText(self.cloud.point_text(int(i)))
+
+    # ------------------------------------------------------------------ the workspace's session
+    needs = "cloud"
+
+    def bind(self, session) -> "CloudView":
+        """Show ``session``'s point cloud (registered, or a Plant3DImageReg plant's own) and meshes."""
+
+        def refresh() -> None:
+            if session.plant is not None:
+                p = session.plant
+                self.set_cloud(session.cloud, None, default="depth",
+                               note=f"{p.plant}: depth camera frame, nominal intrinsics (not calibrated).")
+                return
+            r = session.result
+            note = f"Target {r.target}: object-mesh hits in the rig frame." if r is not None else ""
+            self.set_cloud(session.cloud, session.meshes, default=session.colour_layer(), note=note)
+
+        def display(name: str) -> None:
+            if self.cloud is not None and self.colour.currentText() == name:
+                self._recolour()
+
+        def cursor() -> None:  # the 2D cursor's object point, when the session moved it to one
+            c = session.cursor
+            if c is None or c[0] != "target" or self.cloud is None or session.result is None or \
+                    self.picked_index is not None:
+                return
+            flat = c[1] * session.result.shape[1] + c[2]
+            i = int(np.searchsorted(self.cloud.pixels, flat))
+            if i < len(self.cloud.pixels) and self.cloud.pixels[i] == flat:
+                self.show_point(i)
+
+        session.events.result.connect(refresh)
+        session.events.display.connect(display)
+        session.events.cursor.connect(cursor)
+        return self
 
     # ------------------------------------------------------------------ teardown
     def close_plotter(self) -> None:

@@ -8,7 +8,7 @@ from PySide6.QtWidgets import (
     QComboBox, QDoubleSpinBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QSpinBox, QVBoxLayout, QWidget,
 )
 
-from ...core.display import DEFAULT_CMAPS, canonical_modality
+from ...core import modality
 from .model import COLORMAPS, DisplaySettings, Layer
 
 
@@ -57,6 +57,10 @@ class DisplayControls(QGroupBox):
         lim.addWidget(QLabel("–"))
         lim.addWidget(self.hi)
         form.addRow("Limits (percentiles)", lim)
+        self.limits_note = QLabel("Lower limit must be below the upper; not applied.")
+        self.limits_note.setStyleSheet("color: #a00000; font-size: 11px;")
+        self.limits_note.hide()
+        form.addRow("", self.limits_note)
         form.addRow("Cube as", self.mode)
         form.addRow("Bands", self.band_row)
         lay = QVBoxLayout(self)
@@ -99,7 +103,7 @@ class DisplayControls(QGroupBox):
             return
         s = self.settings_for(L.name)
         self._loading = True
-        is_cube = L.bands > 3 or (L.bands == 3 and canonical_modality(L.modality) == "hyperspectral")
+        is_cube = L.bands > 3 or (L.bands == 3 and modality.is_cube(L.modality))
         single = L.bands == 1
         self.cmap.setEnabled(single)
         i = self.cmap.findData(s.cmap) if s.cmap else 0
@@ -113,7 +117,7 @@ class DisplayControls(QGroupBox):
             default = (0, L.bands // 2, L.bands - 1)[k] if is_cube else 0
             sb.setValue(s.bands[k] if s.bands is not None else default)
         self.band_row.setEnabled(is_cube and s.bands is not None)
-        default_cmap = DEFAULT_CMAPS.get(canonical_modality(L.modality), "gray")
+        default_cmap = modality.default_cmap(L.modality)
         unit = f", {L.unit}" if L.unit else ""
         kind = f"{L.bands} bands" if L.bands > 1 else f"single band, default map {default_cmap}"
         self.info.setText(f"{L.name}: {L.modality}{unit}, {kind}")
@@ -126,20 +130,27 @@ class DisplayControls(QGroupBox):
         if name not in self.layers:
             return
         lo, hi = self.lo.value(), self.hi.value()
-        if hi <= lo:
-            hi = min(100.0, lo + 0.5)
+        bad = hi <= lo
+        for sb in (self.lo, self.hi):  # inverted limits are refused, visibly (never silently bent)
+            sb.setStyleSheet("QDoubleSpinBox { background: #ffd6d6; }" if bad else "")
+            sb.setToolTip("the lower limit must be below the upper limit" if bad else "")
+        self.limits_note.setVisible(bad)
+        if bad:
+            return
         bands = tuple(sb.value() for sb in self.bands) if self.mode.currentData() == "bands" else None
         self.band_row.setEnabled(bands is not None)
-        self.settings[name] = DisplaySettings(self.cmap.currentData(), (lo, hi), bands)
+        # the owner (the workspace's session) stores it when the throttled signal arrives
+        self._pending = (name, DisplaySettings(self.cmap.currentData(), (lo, hi), bands))
         self._timer.start()
 
     def _emit(self) -> None:
-        name = self.layer.currentText()
-        self.changed.emit(name, self.settings_for(name))
+        pending, self._pending = getattr(self, "_pending", None), None
+        if pending is not None:
+            self.changed.emit(*pending)
 
     # for tests and scripted use
     def apply(self, name: str, settings: DisplaySettings) -> None:
-        self.settings[name] = settings
+        self.changed.emit(name, settings)  # the owner stores it (the workspace: session.set_display)
+        self.settings.setdefault(name, settings)  # a panel without an owner keeps it itself
         if self.layer.currentText() == name:
             self._show_layer()
-        self.changed.emit(name, settings)

@@ -10,16 +10,24 @@ from PySide6.QtWidgets import (
     QPushButton, QVBoxLayout, QWidget,
 )
 
-#: output part (core.export.OUTPUTS) -> label shown to the user
-PARTS = {
+#: labels of the output parts; a part the core adds without a label here is still offered
+_LABELS = {
     "registered": "Registered images (float32 TIFF, NaN = not mapped)",
     "previews": "Display previews (PNG, as shown here)",
     "cases": "Case masks per source (PNG, codes 0-6)",
+    "edges": "Mixed edge pixels per source (PNG mask)",
     "areas": "Area mask of the target (PNG, codes 4-6)",
     "pointcloud": "Point cloud with every modality's values (PLY)",
     "mosaic": "Mosaic of all modalities (PNG)",
     "summary": "Summary: inputs, parameters, case counts, timings (JSON)",
 }
+
+
+def parts() -> dict[str, str]:
+    """Output part (every one of core.export.OUTPUTS, in its order) -> label shown to the user."""
+    from ...core.export import OUTPUTS  # on demand: the export module pulls in the registration engine
+
+    return {k: _LABELS.get(k, k) for k in OUTPUTS}
 
 
 def folder_is_nonempty(path: str | Path) -> bool:
@@ -42,7 +50,7 @@ class ExportDialog(QDialog):
         box = QGroupBox("Write")
         bl = QVBoxLayout(box)
         self.boxes: dict[str, QCheckBox] = {}
-        for key, label in PARTS.items():
+        for key, label in parts().items():
             cb = QCheckBox(label)
             cb.setChecked(True)
             self.boxes[key] = cb

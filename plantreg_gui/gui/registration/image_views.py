@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
-from PySide6.QtGui import QColor, QImage, QPainter, QPen, QTransform
+from PySide6.QtGui import QColor, QImage, QPainter, QPen, QPixmap, QTransform
 from PySide6.QtWidgets import (
-    QFrame, QGraphicsItem, QGraphicsLineItem, QGraphicsScene, QGraphicsView, QGridLayout, QLabel,
+    QFrame, QGraphicsItem, QGraphicsLineItem, QGraphicsScene, QGraphicsView, QGridLayout, QHBoxLayout, QLabel,
     QSizePolicy, QVBoxLayout, QWidget,
 )
 
@@ -236,8 +236,46 @@ class TitledView(QWidget):
         self.label = QLabel(title)
         self.label.setStyleSheet("font-weight: bold;")
         self.view = ImageView(title)
+        self.label.setMinimumWidth(40)  # a long title is cut, never widens the grid
+        self.bar = ColourBar()
         lay.addWidget(self.label)
+        lay.addWidget(self.bar)  # its own row: beside the title it squeezed the title and the side panel
         lay.addWidget(self.view, 1)
+
+
+class ColourBar(QWidget):
+    """A colour map's gradient with its limits in the image's unit, e.g. ``18.2 [▆▆▆] 26.1 °C``
+    (what a colour means is part of the picture); hidden for colour and multi-band images."""
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.setSpacing(3)
+        self.lo, self.ramp, self.hi = QLabel(""), QLabel(), QLabel("")
+        for w in (self.lo, self.ramp, self.hi):
+            w.setStyleSheet("font-size: 11px;")
+            lay.addWidget(w)
+        lay.addStretch(1)
+        self.cmap: str | None = None
+        self.limits: tuple[float, float] | None = None
+        self.hide()
+
+    def set_bar(self, cmap: str | None, limits: tuple[float, float] | None, unit: str = "") -> None:
+        self.cmap, self.limits = cmap, limits
+        if cmap is None or limits is None:
+            self.hide()
+            return
+        from ...core import display
+
+        lut = display.colormap_lut(cmap)
+        ramp = np.ascontiguousarray(np.repeat(lut[None, :, :], 10, axis=0))
+        img = QImage(ramp.data, 256, 10, 256 * 3, QImage.Format.Format_RGB888).scaled(160, 10)
+        self.ramp.setPixmap(QPixmap.fromImage(img))
+        fmt = (lambda v: f"{v:.1f}") if max(abs(limits[0]), abs(limits[1])) < 1000 else (lambda v: f"{v:.0f}")
+        self.lo.setText(fmt(limits[0]))
+        self.hi.setText(fmt(limits[1]) + (f" {unit}" if unit else ""))
+        self.show()
 
 
 class ViewGrid(QWidget):
@@ -294,7 +332,9 @@ class SpectrumPlot(QWidget):
         from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
         from matplotlib.figure import Figure
 
-        self.figure = Figure(figsize=(4, 1.6), dpi=90, layout="constrained")
+        # fixed margins: a constrained layout is re-solved on every draw (~0.1-0.5 s on the GUI thread)
+        self.figure = Figure(figsize=(4, 1.6), dpi=90)
+        self.figure.subplots_adjust(left=0.17, right=0.97, top=0.86, bottom=0.25)
         self.canvas = FigureCanvasQTAgg(self.figure)
         self.ax = self.figure.add_subplot(111)
         lay = QVBoxLayout(self)
@@ -317,17 +357,99 @@ class SpectrumPlot(QWidget):
             self._timer.start()
 
     def _draw(self) -> None:
+        """Update the one line in place (clearing and re-plotting the axes costs far more)."""
         if self._pending is None:
             return
         values, wl, title = self._pending
         self._pending = None
         ax = self.ax
-        ax.clear()
-        ax.set_title(title, fontsize=8)
-        ax.tick_params(labelsize=7)
-        if values is not None and np.any(np.isfinite(values)):
-            x = wl if wl is not None else np.arange(values.size)
-            ax.plot(x, values, color="#2a7f2a", lw=1.2)
-            ax.set_xlabel("wavelength (nm)" if wl is not None else "band", fontsize=7)
+        if self._line is None:
+            ax.tick_params(labelsize=7)
             ax.set_ylabel("value", fontsize=7)
+            (self._line,) = ax.plot([], [], color="#2a7f2a", lw=1.2)
+            self._note = ax.text(0.5, 0.5, "", transform=ax.transAxes, ha="center", va="center", fontsize=8,
+                                 color="#555")
+        ax.set_title(title, fontsize=8)
+        ok = values is not None and bool(np.any(np.isfinite(values)))
+        self._line.set_visible(ok)
+        # an unmapped pixel says so instead of showing empty axes with made-up 0-1 limits
+        self.empty = not ok
+        self._note.set_text("" if ok else ("no value at this pixel (not mapped)" if values is not None
+                                            else "move the cursor over the image"))
+        ax.xaxis.set_visible(ok)
+        ax.yaxis.set_visible(ok)
+        if ok:
+            x = wl if wl is not None else np.arange(values.size)
+            self._line.set_data(x, values)
+            ax.set_xlabel("wavelength (nm)" if wl is not None else "band", fontsize=7)
+            ax.relim()
+            ax.autoscale_view()
         self.canvas.draw_idle()
+
+
+# ---------------------------------------------------------------------- the workspace's image grids
+class RawImagesView(ViewGrid):
+    """The recording's raw images, one unlinked view each (each in its own pixel grid)."""
+
+    needs = "raw"
+
+    def __init__(self, session, parent: QWidget | None = None):
+        super().__init__(linked=False, parent=parent)
+        self.session = session
+        session.events.raw.connect(self._refresh)
+        session.events.display.connect(self._display)
+        self.hovered.connect(lambda name, r, c: session.hover(name, r, c))
+
+    def _refresh(self) -> None:
+        s = self.session
+        self.set_layers([L.name for L in s.raw], {L.name: s.layer_title(L, raw=True) for L in s.raw})
+        for L in s.raw:
+            self.set_image(L.name, s.raw_renders[L.name])
+            self.views[L.name].bar.set_bar(*s.colour_bar(L))
+
+    def _display(self, name: str) -> None:
+        L = self.session.layer(name, registered=False)
+        if name in self.views and L is not None:
+            self.set_image(name, self.session.raw_renders[name])
+            self.views[name].bar.set_bar(*self.session.colour_bar(L))
+
+
+class SideBySideView(ViewGrid):
+    """Every registered image in the target grid, zoom, pan and cursor linked."""
+
+    needs = "result"
+
+    def __init__(self, session, parent: QWidget | None = None):
+        super().__init__(linked=True, parent=parent)
+        self.session = session
+        session.events.result.connect(self._refresh)
+        session.events.display.connect(self._display)
+        session.events.cursor.connect(self._cursor)
+        self.hovered.connect(lambda _name, r, c: session.hover("target", r, c))
+
+    def _refresh(self) -> None:
+        s = self.session
+        self.set_layers([L.name for L in s.layers], {L.name: s.layer_title(L) for L in s.layers})
+        for L in s.layers:
+            self.set_image(L.name, s.renders[L.name])
+            self.views[L.name].bar.set_bar(*s.colour_bar(L))
+        self.set_home(home_rect(s.home))
+
+    def _display(self, name: str) -> None:
+        L = self.session.layer(name)
+        if name in self.views and L is not None:
+            self.set_image(name, self.session.renders[name])
+            self.views[name].bar.set_bar(*self.session.colour_bar(L))
+
+    def _cursor(self) -> None:
+        c = self.session.cursor
+        if c is not None and c[0] == "target":
+            self.set_cursor(c[1], c[2])
+
+
+def home_rect(box: tuple[float, float, float, float] | None) -> QRectF | None:
+    """The session's object box (x0, y0, x1, y1) as a scene rectangle."""
+    if box is None:
+        return None
+    x0, y0, x1, y1 = box
+    return QRectF(x0, y0, x1 - x0, y1 - y0)

@@ -3,6 +3,7 @@ each toggleable (per code too), with opacity and a legend in the paper's colours
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtGui import QBrush, QColor
@@ -12,9 +13,13 @@ from PySide6.QtWidgets import (
 )
 
 from ...core import display
-from ...core.register import AREA_NAMES, CASE_NAMES
+from ...core.cases import AREA_NAMES, CASE_NAMES
 from .image_views import ImageView
 from .model import case_table
+
+
+#: overlay colours of the other masks: red mixed edge pixels, blue flying pixels
+EXTRA_COLOURS = {"mixed edge pixels": (255, 40, 40), "flying pixels removed": (60, 120, 255)}
 
 
 class Legend(QTableWidget):
@@ -107,6 +112,10 @@ class MasksView(QWidget):
         l2 = QVBoxLayout(g2)
         l2.addWidget(self.show_areas)
         l2.addWidget(self.area_legend)
+        self.extra_box = QGroupBox("Other masks")
+        self.extra_layout = QVBoxLayout(self.extra_box)
+        self.extra: dict[str, tuple[QCheckBox, np.ndarray]] = {}
+        self.extra_box.hide()
         self.note = QLabel("Rows without a colour have no overlay (P1, P6), as in the paper. P2: occluded in the "
                            "source; P3.1/P3.2: the depth camera cannot see there; %: of all target pixels.")
         self.note.setWordWrap(True)
@@ -117,6 +126,7 @@ class MasksView(QWidget):
         sl.addLayout(form)
         sl.addWidget(g1)
         sl.addWidget(g2)
+        sl.addWidget(self.extra_box)
         sl.addWidget(self.note)
         sl.addStretch(1)
         side.setMinimumWidth(330)
@@ -132,9 +142,8 @@ class MasksView(QWidget):
         lay.setContentsMargins(2, 2, 2, 2)
         lay.addWidget(split)
 
-        self._source_chosen = False
+        self.session = None
         self.source.currentIndexChanged.connect(self._source_changed)
-        self.source.activated.connect(lambda _i: setattr(self, "_source_chosen", True))
         for w in (self.base,):
             w.currentIndexChanged.connect(self.update_view)
         for w in (self.show_cases, self.show_areas):
@@ -144,12 +153,12 @@ class MasksView(QWidget):
         self.area_legend.changed.connect(self.update_view)
 
     def set_data(self, target: str, renders: dict[str, np.ndarray], order: list[str],
-                 cases: dict[str, np.ndarray], area: np.ndarray) -> None:
+                 cases: dict[str, np.ndarray], area: np.ndarray, source: str | None = None) -> None:
         """``renders`` display renderings in the target grid; ``cases[source]`` (H, W) uint8 case
-        codes; ``area`` (H, W) uint8 area codes."""
+        codes; ``area`` (H, W) uint8 area codes; ``source`` the case map to show."""
         self.target, self.renders, self.cases, self.area = target, renders, cases, area
         for combo, items, keep in ((self.base, [n for n in order if n in renders], self.base.currentText()),
-                                   (self.source, list(cases), self.source.currentText())):
+                                   (self.source, list(cases), source or self.source.currentText())):
             combo.blockSignals(True)
             combo.clear()
             combo.addItems(items)
@@ -157,31 +166,70 @@ class MasksView(QWidget):
                 combo.setCurrentText(keep)
             combo.blockSignals(False)
         self.area_legend.set_rows(case_table(area, AREA_NAMES, display.AREA_COLOURS))
-        if self.source.count() and not self._source_chosen:
-            # start with the source that has the most occluded/uncertain pixels: the one worth checking
-            worst = max(cases, key=lambda n: int(np.isin(cases[n], (2, 3, 4)).sum()))
-            self.source.blockSignals(True)
-            self.source.setCurrentText(worst)
-            self.source.blockSignals(False)
-        self._source_changed()
+        self._show_source()
 
     def set_source(self, name: str) -> None:
-        self._source_chosen = True
         self.source.setCurrentText(name)
 
     def _source_changed(self) -> None:
+        if self.session is not None:
+            self.session.set_masks_source(self.source.currentText())  # comes back as masks_source
+        else:
+            self._show_source()
+
+    def _show_source(self) -> None:
         src = self.source.currentText()
         if src in self.cases:
             self.case_legend.set_rows(case_table(self.cases[src], CASE_NAMES, display.CASE_COLOURS))
         self.update_view()
+
+    def showEvent(self, e) -> None:  # noqa: N802
+        super().showEvent(e)
+        if getattr(self, "_stale", False):
+            self.update_view()
+
+    # ------------------------------------------------------------------ the workspace's session
+    needs = "result"
+
+    def bind(self, session) -> "MasksView":
+        """Show ``session``'s case and area maps over its renderings; the source is the session's."""
+        from .image_views import home_rect
+
+        self.session = session
+
+        def refresh() -> None:
+            r = session.result
+            self.view.set_home(home_rect(session.home))
+            if r is None:
+                self.set_data("", {}, [], {}, np.zeros((0, 0), np.uint8))
+                self.view.clear()
+                return
+            self.set_data(r.target, session.renders, [L.name for L in session.layers], r.cases, r.area,
+                          session.masks_source)
+
+        def source() -> None:
+            if session.masks_source and self.source.currentText() != session.masks_source:
+                self.source.blockSignals(True)
+                self.source.setCurrentText(session.masks_source)
+                self.source.blockSignals(False)
+            self._show_source()
+
+        session.events.result.connect(refresh)
+        session.events.masks_source.connect(source)
+        session.events.masks_source.connect(lambda: self.set_extra_masks(session.mask_layers()))
+        session.events.result.connect(lambda: self.set_extra_masks(session.mask_layers()))
+        session.events.display.connect(lambda _name: self.update_view())
+        self.hovered.connect(lambda _src, r, c: session.hover("target", r, c))
+        return self
 
     def composite(self) -> np.ndarray | None:
         base = self.renders.get(self.base.currentText())
         if base is None:
             return None
         op = self.opacity.value() / 100.0
-        # the base is dimmed to grey so the overlay colours read clearly
-        out = np.repeat(np.asarray(base.mean(axis=2, keepdims=True), dtype=np.uint8), 3, axis=2)
+        # the base is dimmed to grey so the overlay colours read clearly (OpenCV: a float mean of a
+        # 4K picture on the GUI thread took ~0.5 s)
+        out = cv2.cvtColor(cv2.cvtColor(np.ascontiguousarray(base), cv2.COLOR_RGB2GRAY), cv2.COLOR_GRAY2RGB)
         if self.show_areas.isChecked() and self.area is not None:
             on = self.area_legend.enabled_codes()
             out = display.overlay(out, self.area, {c: v for c, v in display.AREA_COLOURS.items() if c in on}, op)
@@ -189,9 +237,32 @@ class MasksView(QWidget):
         if self.show_cases.isChecked() and src in self.cases:
             on = self.case_legend.enabled_codes()
             out = display.overlay(out, self.cases[src], {c: v for c, v in display.CASE_COLOURS.items() if c in on}, op)
+        for name, (cb, mask) in self.extra.items():
+            if cb.isChecked() and mask.shape == out.shape[:2]:
+                out = display.overlay(out, mask.astype(np.uint8), {1: EXTRA_COLOURS.get(name, (255, 0, 0))}, op)
         return out
 
+    def set_extra_masks(self, masks: list[tuple[str, np.ndarray, str]]) -> None:
+        """Boolean masks offered as overlays (mixed edge pixels, flying pixels), with their meaning."""
+        keep = {n for n, (cb, _m) in self.extra.items() if cb.isChecked()}
+        for cb, _m in self.extra.values():
+            self.extra_layout.removeWidget(cb)
+            cb.deleteLater()
+        self.extra = {}
+        for name, mask, what in masks:
+            cb = QCheckBox(f"{name} ({int(mask.sum()):,})")
+            cb.setToolTip(what)
+            cb.setChecked(name in keep)
+            cb.toggled.connect(self.update_view)
+            self.extra_layout.addWidget(cb)
+            self.extra[name] = (cb, mask)
+        self.extra_box.setVisible(bool(masks))
+
     def update_view(self) -> None:
+        if not self.isVisible():  # composed when shown (showEvent): hidden tabs cost nothing
+            self._stale = True
+            return
+        self._stale = False
         img = self.composite()
         if img is None:
             self.view.clear()

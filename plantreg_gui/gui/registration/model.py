@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from ...core import display
-from ...core.display import canonical_modality
+from ...core import modality as _mod
+from ...core.depth import to_millimetres
 
 DEPTH = "depth"  # pseudo-modality: z of the hit point (registered) or the raw depth map
 
@@ -35,27 +36,35 @@ class DisplaySettings:
         return replace(self, **kw)
 
 
-def render(img: np.ndarray, modality: str, settings: DisplaySettings | None = None) -> np.ndarray:
-    """Any image (H, W[, C]) -> (H, W, 3) uint8, as the core renders it for previews."""
+def render(img: np.ndarray, modality: str, settings: DisplaySettings | None = None,
+           pca: display.PcaBasis | None = None) -> np.ndarray:
+    """Any image (H, W[, C]) -> (H, W, 3) uint8, as the core renders it for previews. ``pca``: the
+    false-colour basis of this camera's raw cube, so raw and registered cubes look alike."""
     s = settings or DisplaySettings()
     bands = s.bands
-    if bands is not None and (img.ndim != 3 or img.shape[2] <= 3 and canonical_modality(modality) != "hyperspectral"):
+    if bands is not None and (img.ndim != 3 or img.shape[2] <= 3 and not _mod.is_cube(modality)):
         bands = None
-    return display.to_rgb8(img, modality=modality, cmap=s.cmap, percentiles=s.percentiles, bands=bands)
+    return display.to_rgb8(img, modality=modality, cmap=s.cmap, percentiles=s.percentiles, bands=bands, pca=pca)
+
+
+def pca_basis(raw: np.ndarray, modality: str, settings: DisplaySettings | None = None) -> display.PcaBasis | None:
+    """The PCA false-colour basis of a raw cube (None for images that are not cubes)."""
+    if raw.ndim != 3 or raw.shape[2] <= 3 and not _mod.is_cube(modality) or raw.shape[2] == 4:
+        return None
+    return display.fit_pca(raw, None, (settings or DisplaySettings()).percentiles)
 
 
 def unit_of(modality: str) -> str:
-    m = canonical_modality(modality)
-    return {"thermal": "°C", DEPTH: "mm"}.get(m, "")
+    return _mod.unit(modality)
 
 
 def format_value(v: float, modality: str) -> str:
     if not np.isfinite(v):
         return "—"
-    m = canonical_modality(modality)
-    if m == "thermal":
+    unit = _mod.unit(modality)
+    if unit == "°C":
         return f"{v:.2f} °C"
-    if m == DEPTH:
+    if unit == "mm":
         return f"{v:.1f} mm"
     if abs(v) >= 1000 or float(v).is_integer():
         return f"{v:.0f}"
@@ -83,7 +92,7 @@ class Layer:
         px = self.data[row, col]
         if self.data.ndim == 2:
             return format_value(float(px), self.modality)
-        if self.bands == 3 and canonical_modality(self.modality) != "hyperspectral":
+        if self.bands == 3 and not _mod.is_cube(self.modality):
             if not np.all(np.isfinite(px.astype(np.float64))):
                 return "—"
             return "(" + ", ".join(format_value(float(v), self.modality) for v in px) + ")"
@@ -135,9 +144,8 @@ def raw_layers(rig: Any | None, recording: Any) -> list[Layer]:
     """The recording's raw images (depth first, in mm when the rig gives the scale)."""
     layers = []
     if recording.depth is not None:
-        scale = rig.depth_scale if rig is not None else 0.001
-        d = recording.depth.astype(np.float32) * np.float32(scale * 1000.0)
-        d[~(d > 0)] = np.nan
+        scale = getattr(recording, "depth_scale", None) or (rig.depth_scale if rig is not None else 0.001)
+        d = to_millimetres(recording.depth, scale)
         layers.append(Layer(DEPTH, DEPTH, d, None, "mm"))
     for name, img in recording.images.items():
         cam = None
@@ -150,14 +158,7 @@ def raw_layers(rig: Any | None, recording: Any) -> list[Layer]:
 
 
 def _guess_modality(name: str, img: np.ndarray) -> str:
-    n = name.lower()
-    for key, mod in (("therm", "thermal"), ("ir", "infrared"), ("infra", "infrared"), ("hs", "hyperspectral"),
-                     ("rgb", "rgb"), ("colo", "rgb")):
-        if key in n:
-            return mod
-    if img.ndim == 3 and img.shape[2] > 4:
-        return "hyperspectral"
-    return "rgb" if img.ndim == 3 else "gray"
+    return _mod.guess(name, 1 if img.ndim == 2 else img.shape[2])
 
 
 @dataclass

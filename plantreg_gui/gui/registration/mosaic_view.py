@@ -40,7 +40,7 @@ class MosaicView(QWidget):
         self.tile_slider.setValue(64)
         self.tile_slider.setMaximumWidth(140)
         self.tile_slider.valueChanged.connect(self.tile.setValue)
-        self.tile.valueChanged.connect(lambda v: self.tile_slider.setValue(min(v, self.tile_slider.maximum())))
+        self.tile.valueChanged.connect(self._tile_to_slider)
         self.alpha = QSlider(Qt.Orientation.Horizontal)
         self.alpha.setRange(0, 100)
         self.alpha.setValue(50)
@@ -85,6 +85,12 @@ class MosaicView(QWidget):
         self.alpha.valueChanged.connect(self.update_view)
         self.flicker.toggled.connect(self._toggle_flicker)
         self._sync_controls()
+
+    def _tile_to_slider(self, v: int) -> None:
+        # the slider covers 4-400 px only; a larger typed tile must not be pulled back to 400
+        self.tile_slider.blockSignals(True)
+        self.tile_slider.setValue(min(v, self.tile_slider.maximum()))
+        self.tile_slider.blockSignals(False)
 
     # ------------------------------------------------------------------ data
     def set_renders(self, renders: dict[str, np.ndarray], order: list[str],
@@ -180,3 +186,22 @@ class MosaicView(QWidget):
 
     def stop(self) -> None:
         self._flick_timer.stop()
+
+    # ------------------------------------------------------------------ the workspace's session
+    needs = "result"
+
+    def bind(self, session) -> "MosaicView":
+        """Show ``session``'s registered renderings; hovering moves its cursor."""
+        from .image_views import home_rect
+        from .model import DEPTH
+
+        def refresh() -> None:
+            cams = [L.name for L in session.layers if L.name != DEPTH]
+            home = home_rect(session.home)
+            self.view.set_home(home)
+            self.set_renders(session.renders, cams, None if home is None else (int(home.height()), int(home.width())))
+
+        session.events.result.connect(refresh)
+        session.events.display.connect(lambda _name: self.update_view())
+        self.hovered.connect(lambda _src, r, c: session.hover("target", r, c))
+        return self

@@ -1,6 +1,6 @@
 """Reading the public Plant3DImageReg recordings (Stumpe et al.) for inspection.
 
-Pure numpy/OpenCV, no Qt, so that it can move to the core later.
+Pure numpy/OpenCV, no Qt (the workspace reads it on a worker; scripts can use it too).
 
 The data set (``../shared/data/plant3dimagereg``) is laid out as one folder per image kind and
 one file per plant (``lidar_depthmap_np/01grapevine.npy``, ``infra_np/...``, ``thermal_np_01/...``,
@@ -20,8 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ...core.errors import InputError
-from ...core.imageio import read_image
+from .camera import Camera
+from .depth import back_project as _back_project_hw3
+from .depth import points_and_pixels, to_metres
+from .errors import InputError
+from .imageio import read_image
 
 #: folder -> (image name shown to the user, unit, modality)
 KINDS: dict[str, tuple[str, str, str]] = {
@@ -72,15 +75,11 @@ def nominal_intrinsics(width: int = NOMINAL_SIZE[0], height: int = NOMINAL_SIZE[
 
 def back_project(depth_mm: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Depth map (H, W) in millimetres -> points (N, 3) in metres in the depth camera frame
-    (x right, y down, z forward) and their flat pixel indices (N,). Pixels with 0 depth are skipped."""
+    (x right, y down, z forward) and their flat pixel indices (N,). Pixels with 0 depth are skipped.
+    A pinhole camera (no distortion) through the core's one back-projection."""
     h, w = depth_mm.shape
-    valid = np.asarray(depth_mm, dtype=np.float64) > 0
-    idx = np.flatnonzero(valid)
-    v, u = np.divmod(idx, w)
-    z = depth_mm.ravel()[idx].astype(np.float64) / 1000.0
-    x = (u - K[0, 2]) / K[0, 0] * z
-    y = (v - K[1, 2]) / K[1, 1] * z
-    return np.stack([x, y, z], axis=1).astype(np.float32), idx
+    cam = Camera("depth", "depth", w, h, np.asarray(K, dtype=np.float64), np.zeros(5), np.eye(3), np.zeros(3))
+    return points_and_pixels(_back_project_hw3(cam, to_metres(depth_mm, 0.001)))
 
 
 @dataclass

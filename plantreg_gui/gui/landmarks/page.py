@@ -1,0 +1,624 @@
+"""The landmark page: a view of :class:`~plantreg_gui.core.landmark_session.LandmarkSession`.
+
+Left: the depth camera's image (infrared), right: the chosen camera, third: the chosen camera
+registered into the infrared by the current rig (blend / checkerboard / flicker). Click a point
+on the left, then the same point on the right; drag a marker to move it (zoom in for sub-pixel
+placement); the residual of every point is drawn next to it (red line: where the rig puts it).
+Fit, refine (on workers, with progress and cancel), nudge the camera's pose with keys, undo,
+save. All state and computation are in the session; this widget only shows it and forwards
+the user's actions.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from PySide6.QtCore import Qt, QTimer, Signal
+from PySide6.QtGui import QKeySequence, QShortcut
+from PySide6.QtWidgets import (
+    QAbstractItemView, QCheckBox, QComboBox, QDoubleSpinBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout,
+    QLabel, QPlainTextEdit, QProgressBar, QPushButton, QSlider, QSplitter, QTableWidget, QTableWidgetItem,
+    QVBoxLayout, QWidget,
+)
+
+from ...core.display import blend, checkerboard, default_tile, to_rgb8
+from ...core.errors import PlantregError
+from ...core.landmark_session import LandmarkSession, OverlayImages
+from ..workers import Worker, show_error
+from .point_view import Marker, PointView
+
+#: keys of the nudge panel: key -> (kind, camera axis, sign). Rotations about the camera's own
+#: axes (x right, y down, z forward), translations along them -- as OpenCalib's manual panel.
+NUDGE_KEYS = {
+    Qt.Key.Key_W: ("rotate", 0, +1), Qt.Key.Key_S: ("rotate", 0, -1),      # tilt
+    Qt.Key.Key_A: ("rotate", 1, -1), Qt.Key.Key_D: ("rotate", 1, +1),      # pan
+    Qt.Key.Key_Q: ("rotate", 2, -1), Qt.Key.Key_E: ("rotate", 2, +1),      # roll
+    Qt.Key.Key_Left: ("translate", 0, -1), Qt.Key.Key_Right: ("translate", 0, +1),
+    Qt.Key.Key_Up: ("translate", 1, -1), Qt.Key.Key_Down: ("translate", 1, +1),
+    Qt.Key.Key_PageUp: ("translate", 2, +1), Qt.Key.Key_PageDown: ("translate", 2, -1),
+}
+
+FREE_PRESETS = {
+    "pose": (),
+    "pose + focal": ("focal",),
+    "pose + focal, principal, k1": ("focal", "principal", "k1"),
+}
+
+
+class LandmarkPage(QWidget):
+    """The page. ``open(rig, landmarks, recordings)`` or ``set_session(session)``."""
+
+    overlay_ready = Signal()
+    fit_done = Signal()
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.session: LandmarkSession | None = None
+        self._workers: set[Worker] = set()
+        self._fit_worker: Worker | None = None
+        self._refine_worker: Worker | None = None
+        self._overlay_worker: Worker | None = None
+        self._overlay_dirty = False
+        self.overlay: OverlayImages | None = None
+        self._flick = False
+        self._build()
+
+    # ------------------------------------------------------------------ layout
+    def _build(self) -> None:
+        top = QHBoxLayout()
+        self.open_button = QPushButton("Open…")
+        self.open_button.setToolTip("open a rig and a landmarks file")
+        self.open_button.clicked.connect(self._ask_open)
+        self.recording_combo = QComboBox()
+        self.recording_combo.setMinimumContentsLength(18)
+        self.recording_combo.currentTextChanged.connect(self._on_recording)
+        self.camera_combo = QComboBox()
+        self.camera_combo.currentTextChanged.connect(self._on_camera)
+        self.free_combo = QComboBox()
+        self.free_combo.addItems(list(FREE_PRESETS))
+        self.free_combo.setToolTip("what the fit may change in the other cameras")
+        self.depth_free = QCheckBox("depth camera k1 + principal")
+        self.depth_free.setToolTip("also fit the depth camera's first radial term and principal point "
+                                   "(the Azure Kinect's lens is strongly distorted)")
+        self.fit_button = QPushButton("Fit")
+        self.fit_button.setToolTip("fit the rig to all landmarks of all recordings (F)")
+        self.fit_button.clicked.connect(self.run_fit)
+        self.refine_button = QPushButton("Refine")
+        self.refine_button.setToolTip("refine the camera poses from the images (normalised information distance)")
+        self.refine_button.clicked.connect(self.run_refine)
+        self.cancel_button = QPushButton("Cancel")
+        self.cancel_button.setEnabled(False)
+        self.cancel_button.clicked.connect(self.cancel)
+        self.progress = QProgressBar()
+        self.progress.setRange(0, 1000)
+        self.progress.setMaximumWidth(160)
+        self.progress.setTextVisible(False)
+        self.undo_button = QPushButton("Undo")
+        self.undo_button.clicked.connect(lambda: self._do(self.session.undo))
+        self.redo_button = QPushButton("Redo")
+        self.redo_button.clicked.connect(lambda: self._do(self.session.redo))
+        self.delete_button = QPushButton("Delete point")
+        self.delete_button.clicked.connect(lambda: self._do(self.session.delete_point))
+        self.save_rig_button = QPushButton("Save rig…")
+        self.save_rig_button.clicked.connect(self._ask_save_rig)
+        self.save_lm_button = QPushButton("Save landmarks")
+        self.save_lm_button.clicked.connect(self._ask_save_landmarks)
+        self.camera_combo.setMinimumContentsLength(12)
+        self.progress.setVisible(False)
+        for w in (self.open_button, QLabel("Recording"), self.recording_combo, QLabel("Camera"), self.camera_combo,
+                  self.undo_button, self.redo_button, self.delete_button, self.save_lm_button, self.save_rig_button):
+            top.addWidget(w)
+        top.addStretch(1)
+        second = QHBoxLayout()
+        for w in (QLabel("Fit frees"), self.free_combo, self.depth_free, self.fit_button, self.refine_button,
+                  self.cancel_button, self.progress):
+            second.addWidget(w)
+        second.addStretch(1)
+
+        self.left = PointView("depth camera")
+        self.right = PointView("camera")
+        self.over = PointView("overlay")
+        for v in (self.left, self.right, self.over):
+            v.setFocusPolicy(Qt.FocusPolicy.ClickFocus)
+        self.left.clicked.connect(self._left_clicked)
+        self.right.clicked.connect(self._right_clicked)
+        for v, where in ((self.left, "depth"), (self.right, None)):
+            v.marker_pressed.connect(lambda i: self._do(self.session.select, i))
+            v.drag_started.connect(lambda i, w=where: self._drag_start(i, w))
+            v.dragged.connect(lambda i, u, vv, w=where: self._drag(i, w, u, vv, False))
+            v.drag_finished.connect(lambda i, u, vv, w=where: self._drag(i, w, u, vv, True))
+        self.left.hovered.connect(lambda r, c: self.over.set_cursor_pixel(r, c))
+        self.over.hovered.connect(lambda r, c: self.left.set_cursor_pixel(r, c))
+        self.left_title, self.right_title = QLabel(), QLabel()
+        self.over_title = QLabel("Registered by the current rig")
+        mode = QHBoxLayout()
+        self.mode_combo = QComboBox()
+        self.mode_combo.addItems(["blend", "checkerboard", "flicker"])
+        self.mode_combo.currentTextChanged.connect(self._compose)
+        self.alpha = QSlider(Qt.Orientation.Horizontal)
+        self.alpha.setRange(0, 100)
+        self.alpha.setValue(50)
+        self.alpha.valueChanged.connect(self._compose)
+        self.overlay_label = QLabel("")
+        mode.addWidget(self.over_title)
+        mode.addWidget(self.mode_combo)
+        mode.addWidget(self.alpha, 1)
+        self._flick_timer = QTimer(self)
+        self._flick_timer.setInterval(500)
+        self._flick_timer.timeout.connect(self._flicker_tick)
+
+        views = QSplitter(Qt.Orientation.Horizontal)
+        for title, view, extra in ((self.left_title, self.left, None), (self.right_title, self.right, None),
+                                   (None, self.over, mode)):
+            box = QWidget()
+            bl = QVBoxLayout(box)
+            bl.setContentsMargins(2, 2, 2, 2)
+            if title is not None:
+                bl.addWidget(title)
+            if extra is not None:
+                bl.addLayout(extra)
+                bl.addWidget(self.overlay_label)
+            bl.addWidget(view, 1)
+            views.addWidget(box)
+        views.setSizes([500, 500, 500])
+
+        self.table = QTableWidget(0, 5)
+        self.table.setHorizontalHeaderLabels(["#", "residual px", "depth u, v", "camera u, v", "note"])
+        self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
+        self.table.setSelectionMode(QAbstractItemView.SelectionMode.SingleSelection)
+        self.table.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.table.verticalHeader().setVisible(False)
+        self.table.horizontalHeader().setStretchLastSection(True)
+        self.table.itemSelectionChanged.connect(self._table_selected)
+
+        nudge = QGroupBox("Nudge the camera (keys)")
+        nf = QFormLayout(nudge)
+        self.rot_step = QDoubleSpinBox()
+        self.rot_step.setRange(0.01, 10.0)
+        self.rot_step.setValue(0.2)
+        self.rot_step.setSuffix(" °")
+        self.rot_step.setDecimals(2)
+        self.trans_step = QDoubleSpinBox()
+        self.trans_step.setRange(0.1, 100.0)
+        self.trans_step.setValue(2.0)
+        self.trans_step.setSuffix(" mm")
+        nf.addRow("rotation step", self.rot_step)
+        nf.addRow("translation step", self.trans_step)
+        nf.addRow(QLabel("W/S tilt, A/D pan, Q/E roll\n←/→ ↑/↓ move across, PgUp/PgDn forward/back\n"
+                         "Shift = 5× step; F fit, Del delete, Esc cancel click"))
+        self.report_text = QPlainTextEdit()
+        self.report_text.setReadOnly(True)
+        self.report_text.setPlaceholderText("Fit report: residuals per camera, worst landmarks")
+        f = self.report_text.font()
+        f.setFamily("monospace")
+        self.report_text.setFont(f)
+        self.hint = QLabel()
+        self.hint.setWordWrap(True)
+
+        bottom = QSplitter(Qt.Orientation.Horizontal)
+        bottom.addWidget(self.table)
+        bottom.addWidget(nudge)
+        bottom.addWidget(self.report_text)
+        bottom.setSizes([420, 260, 700])
+        main = QSplitter(Qt.Orientation.Vertical)
+        main.addWidget(views)
+        main.addWidget(bottom)
+        main.setSizes([640, 260])
+        lay = QVBoxLayout(self)
+        lay.addLayout(top)
+        lay.addLayout(second)
+        lay.addWidget(self.hint)
+        lay.addWidget(main, 1)
+
+        # nudge keys: an event filter on the views (which would otherwise scroll with the arrows)
+        # and the page's keyPressEvent, so they work wherever the focus is on this page
+        for v in (self.left, self.right, self.over):
+            v.installEventFilter(self)
+        for seq, fn in ((QKeySequence.StandardKey.Undo, lambda: self._do(self.session.undo)),
+                        (QKeySequence.StandardKey.Redo, lambda: self._do(self.session.redo)),
+                        (QKeySequence(Qt.Key.Key_Delete), lambda: self._do(self.session.delete_point)),
+                        (QKeySequence(Qt.Key.Key_Escape), lambda: self._do(self.session.cancel_pending)),
+                        (QKeySequence(Qt.Key.Key_F), self.run_fit)):
+            sc = QShortcut(QKeySequence(seq), self)
+            sc.setContext(Qt.ShortcutContext.WidgetWithChildrenShortcut)
+            sc.activated.connect(fn)
+        self._overlay_timer = QTimer(self)
+        self._overlay_timer.setSingleShot(True)
+        self._overlay_timer.setInterval(250)  # nudges in quick succession: register once
+        self._overlay_timer.timeout.connect(self.update_overlay)
+        self._sync_enabled()
+        self.hint.setText("Open a rig and a landmarks file (plantreg-gui --landmarks FILE --rig RIG).")
+
+    # ------------------------------------------------------------------ session
+    def open(self, rig: str | Path, landmarks: str | Path | None = None,
+             recordings: list[str | Path] | None = None) -> None:
+        """Open files (raises :class:`InputError` naming a bad file)."""
+        s = LandmarkSession.open(rig, landmarks)
+        for r in recordings or []:
+            s.add_recording(r)
+        if s.recording_key is None:
+            from ...core.errors import InputError
+
+            raise InputError("no recording: the landmarks file names none; give --recording DIR", landmarks)
+        s.recording()  # load now: a bad recording is reported here, not on first paint
+        self.set_session(s)
+
+    def set_session(self, s: LandmarkSession) -> None:
+        self.session = s
+        s.events.points.connect(self._points_changed)
+        s.events.selection.connect(self._selection_changed)
+        s.events.rig.connect(self._rig_changed)
+        s.events.report.connect(self._report_changed)
+        self.recording_combo.blockSignals(True)
+        self.recording_combo.clear()
+        self.recording_combo.addItems(s.recording_keys)
+        self.recording_combo.setCurrentText(s.recording_key or "")
+        self.recording_combo.blockSignals(False)
+        self.camera_combo.blockSignals(True)
+        self.camera_combo.clear()
+        self.camera_combo.addItems(s.camera_names())
+        self.camera_combo.setCurrentText(s.camera or "")
+        self.camera_combo.blockSignals(False)
+        self._show_images()
+        self._points_changed()
+        self._selection_changed()
+        self._report_changed()
+        self.update_overlay()
+
+    def _do(self, fn, *args) -> None:
+        """Run a session action from a button or key; user mistakes become a dialog."""
+        if self.session is None:
+            return
+        try:
+            fn(*args)
+        except PlantregError as e:
+            show_error(self, "Landmarks", str(e))
+
+    def _on_recording(self, key: str) -> None:
+        if self.session is not None and key and key != self.session.recording_key:
+            self._do(self.session.set_recording, key)
+            self._show_images()
+            self._points_changed()
+            self.update_overlay()
+
+    def _on_camera(self, cam: str) -> None:
+        if self.session is not None and cam and cam != self.session.camera:
+            self._do(self.session.set_camera, cam)
+            self._show_images()
+            self._points_changed()
+            self.update_overlay()
+
+    def _show_images(self) -> None:
+        s = self.session
+        dname = s.rig.depth().name
+        try:
+            self.left.set_rgb8(to_rgb8(np.asarray(s.depth_image()), s.rig.depth().modality))
+            self.right.set_rgb8(to_rgb8(np.asarray(s.camera_image()), s.rig.camera(s.camera).modality))
+        except PlantregError as e:
+            show_error(self, "Landmarks", str(e))
+            return
+        self.left_title.setText(f"<b>{dname}</b> (depth camera) — click a point here first")
+        self.right_title.setText(f"<b>{s.camera}</b> — then the same point here")
+        self._home_on_points()
+
+    def _home_on_points(self) -> None:
+        """Zoom both views to the clicked points (with a margin): where the work is."""
+        from PySide6.QtCore import QRectF
+
+        s = self.session
+        for view, uvs in ((self.left, [lm.depth_uv for lm in s.points]),
+                          (self.right, [lm.cameras[s.camera] for lm in s.points if s.camera in lm.cameras])):
+            if view.array is None:
+                continue
+            h, w = view.array.shape[:2]
+            if len(uvs) < 2:
+                view.set_home(None)
+                continue
+            a = np.asarray(uvs)
+            lo, hi = a.min(0), a.max(0)
+            m = np.maximum(0.25 * (hi - lo), 0.08 * max(h, w))
+            lo, hi = np.maximum(lo - m, 0), np.minimum(hi + m, [w, h])
+            view.set_home(QRectF(lo[0], lo[1], hi[0] - lo[0], hi[1] - lo[1]))
+
+    # ------------------------------------------------------------------ repaint on events
+    def _markers(self) -> tuple[list[Marker], list[Marker]]:
+        s = self.session
+        res = s.residuals()
+        left, right = [], []
+        for i, lm in enumerate(s.points):
+            r = res.get(i)
+            label = f"{i}" + (f": {r:.1f} px" if r is not None else "")
+            col = (255, 220, 0) if r is None or r < 3 else (255, 140, 0) if r < 8 else (255, 60, 60)
+            if s.camera not in lm.cameras:  # a point of another camera: grey, drawn underneath
+                left.insert(0, Marker(i, lm.depth_uv, "", colour=(150, 150, 150)))  # no label: they pile up
+                continue
+            left.append(Marker(i, lm.depth_uv, label, colour=col))
+            if s.camera in lm.cameras:
+                pred = s.predicted(i) if r is not None else None
+                right.append(Marker(i, lm.cameras[s.camera], label, pred, col))
+        return left, right
+
+    def _points_changed(self) -> None:
+        s = self.session
+        left, right = self._markers()
+        self.left.set_markers(left, s.selected, s.pending)
+        self.right.set_markers(right, s.selected)
+        self.over.set_markers([Marker(m.index, m.uv, "", colour=m.colour) for m in left if m.label], s.selected)
+        rows = s.table()
+        self.table.blockSignals(True)
+        self.table.setRowCount(len(rows))
+        for r, d in enumerate(rows):
+            vals = [str(d["index"]), "—" if d["residual_px"] is None else f"{d['residual_px']:.2f}",
+                    f"{d['depth_uv'][0]:.1f}, {d['depth_uv'][1]:.1f}",
+                    "—" if d["camera_uv"] is None else f"{d['camera_uv'][0]:.1f}, {d['camera_uv'][1]:.1f}", d["note"]]
+            for c, v in enumerate(vals):
+                it = QTableWidgetItem(v)
+                it.setData(Qt.ItemDataRole.UserRole, d["index"])
+                self.table.setItem(r, c, it)
+            if d["index"] == s.selected:
+                self.table.selectRow(r)
+        self.table.resizeColumnsToContents()
+        self.table.blockSignals(False)
+        self._sync_enabled()
+
+    def _selection_changed(self) -> None:
+        s = self.session
+        self.right.grab_markers = s.pending is None
+        self.left.set_markers(self.left.markers, s.selected, s.pending)
+        self.right.set_markers(self.right.markers, s.selected)
+        self.over.set_markers(self.over.markers, s.selected)
+        n = len(s.points)
+        if s.pending is not None:
+            self.hint.setText(f"Now click the same point in <b>{s.camera}</b> (Esc cancels).")
+        elif s.selected is not None:
+            self.hint.setText(f"Point {s.selected} selected: drag it to move, Del to delete. "
+                              f"{n} points in this recording.")
+        else:
+            self.hint.setText(f"{n} points in this recording, {s.landmarks.count()} in all. Click a point in "
+                              f"the depth camera, then in {s.camera}. Wheel zooms, drag pans, double-click fits.")
+        self._sync_enabled()
+
+    def _rig_changed(self) -> None:
+        self._overlay_timer.start()
+
+    def _report_changed(self) -> None:
+        s = self.session
+        rep = s.report or {}
+        text = []
+        if not rep:
+            text.append("Residuals of the rig as opened (not fitted yet):")
+            for c, v in s.summary().items():
+                text.append(f"  {c:<16} n={v['n']:<4} median {v['median_px']:.2f} px   p90 {v['p90_px']:.2f} px   "
+                            f"max {v['max_px']:.2f} px")
+        if "per_camera" in rep:
+            from ...core.rigfit import format_report
+
+            text.append(format_report(rep))
+        if "refine" in rep or "cameras" in rep:
+            cams = rep.get("refine", rep).get("cameras", {})
+            for c, v in cams.items():
+                text.append(f"refine {c}: cost {v.get('start_cost', float('nan')):.3f} -> "
+                            f"{v.get('end_cost', float('nan')):.3f}, "
+                            f"{'converged' if v.get('converged') else 'NOT converged'}")
+        text += [f"warning: {w}" for w in s.warnings]
+        self.report_text.setPlainText("\n".join(text))
+
+    def _sync_enabled(self) -> None:
+        s = self.session
+        busy = self.is_busy(include_overlay=False)
+        for b in (self.fit_button, self.refine_button, self.save_rig_button, self.save_lm_button,
+                  self.recording_combo, self.camera_combo):
+            b.setEnabled(s is not None and not busy)
+        self.undo_button.setEnabled(s is not None and not busy and s.can_undo())
+        self.redo_button.setEnabled(s is not None and not busy and s.can_redo())
+        self.delete_button.setEnabled(s is not None and not busy and s.selected is not None)
+        self.cancel_button.setEnabled(busy)
+        self.progress.setVisible(busy)
+
+    # ------------------------------------------------------------------ clicks and drags
+    def _left_clicked(self, u: float, v: float) -> None:
+        self._do(self.session.click_depth, (u, v))
+
+    def _right_clicked(self, u: float, v: float) -> None:
+        s = self.session
+        if s.pending is None and (s.selected is None or s.camera in s.points[s.selected].cameras):
+            self.hint.setText(f"Click the point in <b>{s.rig.depth().name}</b> first (left view).")
+            return
+        self._do(s.click_camera, (u, v))
+
+    def _drag_start(self, i: int, where: str | None) -> None:
+        s = self.session
+        w = where or s.camera
+        cur = s.points[i].depth_uv if w == "depth" else s.points[i].cameras[w]
+        s.move_point(i, w, cur, undoable=True)  # one undo step for the whole drag
+
+    def _drag(self, i: int, where: str | None, u: float, v: float, final: bool) -> None:
+        self.session.move_point(i, where or self.session.camera, (u, v), undoable=False)
+
+    def _table_selected(self) -> None:
+        items = self.table.selectedItems()
+        if items and self.session is not None:
+            self.session.select(int(items[0].data(Qt.ItemDataRole.UserRole)))
+
+    # ------------------------------------------------------------------ nudge
+    def eventFilter(self, obj, e) -> bool:  # noqa: N802
+        from PySide6.QtCore import QEvent
+
+        if e.type() == QEvent.Type.KeyPress and e.key() in NUDGE_KEYS:
+            self.nudge_key(e.key(), bool(e.modifiers() & Qt.KeyboardModifier.ShiftModifier))
+            return True
+        return super().eventFilter(obj, e)
+
+    def keyPressEvent(self, e) -> None:  # noqa: N802
+        if e.key() in NUDGE_KEYS:
+            self.nudge_key(e.key(), bool(e.modifiers() & Qt.KeyboardModifier.ShiftModifier))
+        else:
+            super().keyPressEvent(e)
+
+    def nudge_key(self, key, fast: bool = False) -> None:
+        if self.session is None or self.is_busy(include_overlay=False):
+            return
+        kind, axis, sign = NUDGE_KEYS[Qt.Key(key)]
+        step = self.rot_step.value() if kind == "rotate" else self.trans_step.value() / 1000.0
+        self._do(self.session.nudge, kind, axis, sign * step * (5.0 if fast else 1.0))
+
+    # ------------------------------------------------------------------ workers
+    def free_items(self) -> frozenset[str]:
+        s = self.session
+        items = {f"{c}:{it}" for c in s.landmarks.camera_names for it in FREE_PRESETS[self.free_combo.currentText()]}
+        if self.depth_free.isChecked():
+            d = s.rig.depth().name
+            items |= {f"{d}:k1", f"{d}:principal"}
+        return frozenset(items)
+
+    def _start(self, w: Worker, on_done, label: str) -> Worker:
+        self._workers.add(w)
+        w.progress.connect(lambda f, m: (self.progress.setValue(int(1000 * f)), self.hint.setText(m)))
+        w.finished.connect(on_done)
+        w.failed.connect(lambda msg, det: show_error(self, label, msg, det))
+        w.cancelled.connect(lambda: self.hint.setText(f"{label} cancelled."))
+        w.done.connect(lambda: (self._workers.discard(w), self._sync_enabled(), self.progress.setValue(0)))
+        w.start()
+        self._sync_enabled()
+        return w
+
+    def run_fit(self) -> None:
+        if self.session is None or self.is_busy(include_overlay=False):
+            return
+        self.session.free = self.free_items()
+        self.hint.setText("Fitting…")
+        self._fit_worker = self._start(Worker(self.session.fit_job()), self._fit_finished, "Fit")
+
+    def _fit_finished(self, result) -> None:
+        self.session.apply_fit(result)
+        s = self.session
+        pc = result.report.get("per_camera", {})
+        self.hint.setText("Fitted: " + ", ".join(f"{c} median {v['median_px']:.2f} px (n={v['n']})"
+                                                 for c, v in pc.items()))
+        self.fit_done.emit()
+
+    def run_refine(self) -> None:
+        if self.session is None or self.is_busy(include_overlay=False):
+            return
+        self.session.free = self.free_items()
+        try:
+            job = self.session.refine_job()
+        except PlantregError as e:
+            show_error(self, "Refine", str(e))
+            return
+        self.hint.setText("Refining from the images…")
+        self._refine_worker = self._start(Worker(job), self._refine_finished, "Refine")
+
+    def _refine_finished(self, result) -> None:
+        s = self.session
+        rep = dict(s.report or {})
+        rep["refine"] = result.report
+        result.report = rep
+        s.apply_fit(result)
+        self.hint.setText("Refined. " + " ".join(result.warnings[:2]))
+        self.fit_done.emit()
+
+    def cancel(self) -> None:
+        for w in list(self._workers):
+            if w is not self._overlay_worker:
+                w.cancel()
+
+    def update_overlay(self) -> None:
+        """Register the chosen camera into the infrared with the current rig, on a worker."""
+        if self.session is None:
+            return
+        if self._overlay_worker is not None and self._overlay_worker.is_running():
+            self._overlay_dirty = True  # run again with the newest rig when this one ends
+            return
+        self._overlay_dirty = False
+        self.overlay_label.setText("registering…")
+        try:
+            job = self.session.overlay_job()
+        except PlantregError as e:
+            self.overlay_label.setText(str(e))
+            return
+        w = Worker(job)
+        self._overlay_worker = w
+        self._workers.add(w)
+        w.finished.connect(self._overlay_finished)
+        w.failed.connect(lambda msg, det: self.overlay_label.setText(f"overlay failed: {msg}"))
+        w.done.connect(lambda: (self._workers.discard(w), self._overlay_again()))
+        w.start()
+
+    def _overlay_again(self) -> None:
+        if self._overlay_dirty:
+            self.update_overlay()
+        else:
+            self.overlay_ready.emit()
+
+    def _overlay_finished(self, ov: OverlayImages) -> None:
+        self.overlay = ov
+        self.overlay_label.setText(f"{ov.camera} on {self.session.rig.depth().name}: "
+                                   f"seen in {100 * ov.mapped.mean():.0f} % of the image")
+        self._compose()
+
+    def _compose(self, *_a) -> None:
+        ov = self.overlay
+        if ov is None:
+            return
+        mode = self.mode_combo.currentText()
+        self.alpha.setVisible(mode == "blend")
+        if mode == "flicker":
+            self._flick_timer.start()
+            img = ov.registered if self._flick else ov.base
+        else:
+            self._flick_timer.stop()
+            if mode == "blend":
+                img = blend(ov.base, ov.registered, self.alpha.value() / 100.0)
+            else:
+                img = checkerboard(ov.base, ov.registered, default_tile(ov.base.shape))
+            img = np.where(ov.mapped[..., None], img, ov.base)  # unmapped pixels: the infrared alone
+        self.over.set_rgb8(np.ascontiguousarray(img))
+
+    def _flicker_tick(self) -> None:
+        self._flick = not self._flick
+        self._compose()
+
+    # ------------------------------------------------------------------ saving
+    def _ask_open(self) -> None:
+        rig, _ = QFileDialog.getOpenFileName(self, "Rig file", "", "Rig (*.json)")
+        if not rig:
+            return
+        lm, _ = QFileDialog.getOpenFileName(self, "Landmarks file", str(Path(rig).parent), "Landmarks (*.json)")
+        if lm:
+            try:
+                self.open(rig, lm)
+            except PlantregError as e:
+                show_error(self, "Cannot open", str(e))
+
+    def _ask_save_rig(self) -> None:
+        if self.session is None:
+            return
+        path, _ = QFileDialog.getSaveFileName(self, "Save rig", "rig.json", "Rig (*.json)")
+        if path:
+            self._do(self.session.save_rig, path)
+
+    def _ask_save_landmarks(self) -> None:
+        s = self.session
+        if s is None:
+            return
+        path = s.landmarks.path
+        if path is None:
+            p, _ = QFileDialog.getSaveFileName(self, "Save landmarks", "landmarks.json", "Landmarks (*.json)")
+            if not p:
+                return
+            path = Path(p)
+        self._do(s.save_landmarks, path)
+        self.hint.setText(f"Landmarks saved to {path}.")
+
+    # ------------------------------------------------------------------ app hooks
+    def is_busy(self, include_overlay: bool = True) -> bool:
+        return any(w.is_running() for w in self._workers
+                   if include_overlay or w is not self._overlay_worker)
+
+    def shutdown(self) -> None:
+        self._flick_timer.stop()
+        self._overlay_timer.stop()
+        for w in list(self._workers):
+            w.wait()

@@ -1,0 +1,193 @@
+"""The landmark page under Xvfb (pytest-qt): click pairs, drag, undo, fit, overlay, nudge, refine,
+save -- against the demo's known truth, with the GUI thread watched by StallProbe.
+
+Stall tolerance: the target is no GUI-thread gap over 200 ms; on the shared 2-core test machine
+(other jobs running) a gap up to 0.5 s is accepted, as in tests/test_gui_workspace.py. The
+measured maximum is printed.
+"""
+
+import json
+
+import numpy as np
+import pytest
+from PySide6.QtCore import QPointF, Qt
+
+from plantreg_gui.core.landmark_session import LandmarkSession
+from plantreg_gui.core.landmarks import LandmarkSet
+from plantreg_gui.core.recording import Recording
+from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.rigfit import RecordingLandmarks, evaluate_landmarks
+from plantreg_gui.core.synthetic import make_plant_scene
+from plantreg_gui.core.synthetic.landmarks import perturb_rig, synthetic_landmarks
+
+CAM = "thermal"
+ALLOWED_GAP_S = 0.5
+
+
+@pytest.fixture(scope="module")
+def demo(demo_dir):
+    rig = Rig.load(demo_dir / "rig.json")
+    rec = Recording.load(demo_dir / "recording", rig)
+    scene = make_plant_scene(0)  # write_demo's default seed
+    return rig, rec, scene
+
+
+def unseen_px(true_rig, fitted, scene, rec):
+    lms = synthetic_landmarks(true_rig, scene, 12, 0.0, np.random.default_rng(77), sources=[CAM])
+    rows, _ = evaluate_landmarks(fitted, [RecordingLandmarks("u", rec.depth_m(true_rig.depth_scale), lms)], [CAM])
+    return float(np.median([d["residual_px"] for d in rows]))
+
+
+def click(qtbot, view, uv):
+    """Left click at image pixel ``uv`` (pixel centres at integers); returns where it landed."""
+    p = view.mapFromScene(QPointF(uv[0] + 0.5, uv[1] + 0.5))
+    qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=p)
+    return p
+
+
+@pytest.fixture
+def page(qtbot, demo, tmp_path):
+    from plantreg_gui.gui.landmarks.page import LandmarkPage
+
+    rig, rec, scene = demo
+    start = perturb_rig(rig, np.random.default_rng(4), 3.0, 0.03, 0.0, cameras=[CAM])
+    lms = LandmarkSet(base=tmp_path, path=tmp_path / "landmarks.json")
+    s = LandmarkSession(start, lms, {"plant": rec})
+    s.set_camera(CAM)
+    p = LandmarkPage()
+    qtbot.addWidget(p)
+    p.resize(1500, 900)
+    p.show()
+    qtbot.waitExposed(p)
+    p.set_session(s)
+    qtbot.waitUntil(lambda: not p.is_busy(), timeout=300_000)
+    yield p
+    p.shutdown()
+
+
+def test_click_pairs_fit_overlay_nudge_save(qtbot, page, demo, tmp_path):
+    from plantreg_gui.gui.stall_probe import StallProbe
+
+    rig, rec, scene = demo
+    s = page.session
+    before = unseen_px(rig, s.rig, scene, rec)
+    truth = synthetic_landmarks(rig, scene, 12, 0.0, np.random.default_rng(5), sources=[CAM])
+    for lm in truth:  # clicks at the fitted zoom land within one screen pixel (about 1.3 image px)
+        click(qtbot, page.left, lm.depth_uv)
+        assert s.pending is not None and np.allclose(s.pending, lm.depth_uv, atol=1.0)
+        click(qtbot, page.right, lm.cameras[CAM])
+        assert s.pending is None
+    assert len(s.points) == 12 and page.table.rowCount() == 12
+    # a click in the camera view without a depth click first adds nothing
+    click(qtbot, page.right, truth[0].cameras[CAM])
+    assert len(s.points) == 12
+
+    # drag point 0 in the camera view to the exact (sub-pixel) truth, one undo step
+    s.select(0)
+    target = truth[0].cameras[CAM] + np.array([0.3, -0.2])
+    page._drag_start(0, None)
+    page._drag(0, None, *target, True)
+    assert np.allclose(s.points[0].cameras[CAM], target)
+    page.undo_button.click()
+    assert not np.allclose(s.points[0].cameras[CAM], target)
+
+    # delete and undo
+    s.select(3)
+    page.delete_button.click()
+    assert len(s.points) == 11
+    page.undo_button.click()
+    assert len(s.points) == 12
+
+    with StallProbe() as probe:
+        with qtbot.waitSignal(page.fit_done, timeout=120_000):
+            page.fit_button.click()
+        with qtbot.waitSignal(page.overlay_ready, timeout=300_000):
+            pass
+    after = unseen_px(rig, s.rig, scene, rec)
+    print(f"fit: unseen residual {before:.1f} -> {after:.2f} px; max GUI gap {probe.max_gap * 1000:.0f} ms")
+    assert before > 10.0 and after < 1.0  # click quantisation averages out over 12 points
+    assert probe.ticks > 5 and probe.max_gap < ALLOWED_GAP_S, probe.stalls(0.2)
+    assert page.overlay is not None and page.overlay.mapped.mean() > 0.05
+    assert "thermal" in page.report_text.toPlainText()
+    # every point's residual is drawn next to it and the table is worst first
+    res = [float(page.table.item(r, 1).text()) for r in range(page.table.rowCount())]
+    # (a depth pixel at a leaf edge can take its depth from the surface behind: such a point is
+    # flagged as an outlier by the robust fit and tops the table, the others stay near zero)
+    assert res == sorted(res, reverse=True) and float(np.median(res)) < 1.0
+    assert all(":" in m.label for m in page.right.markers)
+
+    # nudge with keys: W tilts 0.2 degrees, the overlay is redone on a worker
+    page.left.setFocus()
+    t0 = s.rig.camera(CAM).R_cam_rig.copy()
+    with StallProbe() as probe:
+        qtbot.keyClick(page.left, Qt.Key.Key_W)
+        qtbot.keyClick(page.left, Qt.Key.Key_W, Qt.KeyboardModifier.ShiftModifier)
+        with qtbot.waitSignal(page.overlay_ready, timeout=300_000):
+            pass
+    dR = s.rig.camera(CAM).R_cam_rig @ t0.T
+    assert np.degrees(np.arccos((np.trace(dR) - 1) / 2)) == pytest.approx(1.2, abs=1e-6)
+    assert probe.max_gap < ALLOWED_GAP_S, probe.stalls(0.2)
+    assert unseen_px(rig, s.rig, scene, rec) > 2.0
+    with qtbot.waitSignal(page.fit_done, timeout=120_000):
+        page.fit_button.click()
+    assert unseen_px(rig, s.rig, scene, rec) < 1.0
+
+    # save both
+    page.save_lm_button.click()
+    back = LandmarkSet.load(tmp_path / "landmarks.json")
+    assert back.count() == 12
+    s.save_rig(tmp_path / "rig.json")
+    d = json.loads((tmp_path / "rig.json").read_text())
+    assert d["calibration"]["landmarks_used"] == 12
+    for mode in ("checkerboard", "flicker", "blend"):
+        page.mode_combo.setCurrentText(mode)
+        assert page.over.array is not None
+
+
+def _refine_available() -> bool:
+    try:
+        import plantreg_gui.core.refine  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def test_refine_runs_on_a_worker_with_progress_and_cancel(qtbot, page, demo):
+    """The Refine button: on a worker, progress shown, cancel honoured, result applied (undoable).
+
+    With core/refine.py present the real refinement runs on the demo's textured images; without it
+    (it lands from another branch) the page must say so instead of failing."""
+    rig, rec, scene = demo
+    s = page.session
+    if not _refine_available():
+        from plantreg_gui.core.errors import InputError
+
+        with pytest.raises(InputError, match="not available"):
+            s.refine_job()
+        pytest.xfail("core/refine.py (issue 8 part 2) is not merged into this branch yet")
+    from plantreg_gui.core.refine import RefineParams
+
+    before = unseen_px(rig, s.rig, scene, rec)
+    # cancel: the worker stops at its next progress call and the rig stays as it was
+    rig0 = s.rig.to_dict()
+    page.run_refine()
+    assert page.is_busy(include_overlay=False) and page.cancel_button.isEnabled()
+    with qtbot.waitSignal(page._refine_worker.cancelled, timeout=120_000):
+        page.cancel_button.click()
+    assert s.rig.to_dict() == rig0
+    # a full run (reduced levels: the demo start is 3 degrees off)
+    s.refine_fn = None
+    job = s.refine_job(params=RefineParams(levels_deg=(1.6, 0.4, 0.0), max_points=2000, min_points=1000))
+    from plantreg_gui.gui.workers import Worker
+
+    seen = []
+    w = Worker(job)
+    w.progress.connect(lambda f, m: seen.append(f))
+    with qtbot.waitSignal(w.finished, timeout=300_000) as blocker:
+        w.start()
+    page._refine_finished(blocker.args[0])
+    after = unseen_px(rig, s.rig, scene, rec)
+    print(f"refine: unseen residual {before:.1f} -> {after:.2f} px")
+    assert seen and after < before / 3
+    s.undo()
+    assert s.rig.to_dict() == rig0
