@@ -189,7 +189,7 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
         sp = w.pages[6]
         # the ROI comes from a plant, not from a board pose (defect 1): a board pose cannot set it
         assert sp.source()[0] == "pose" and not sp.fit_btn.isEnabled() and not sp.fit_roi()
-        assert "Load plant depth map" in sp.roi_msg.text()
+        qtbot.waitUntil(lambda: "Load plant depth map" in sp.roi_msg.text(), timeout=10000)  # drawn on a timer
         plant = calibration_session.parent / "recording"
         assert sp.load_plant_depth(plant / "recording.json")
         assert sp.source() == ("plant", str(plant / "depth.png")) and sp.fit_btn.isEnabled()
