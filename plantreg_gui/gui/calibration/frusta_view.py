@@ -26,28 +26,6 @@ def frustum_lines(cam, depth: float) -> tuple[np.ndarray, np.ndarray]:
     return pts, lines
 
 
-_preload: list = []
-
-
-def preload() -> None:
-    """Import pyvista/pyvistaqt (VTK: seconds on a loaded machine) on a background thread, so
-    that showing the 3D view later does not import them on the GUI thread. Once per process."""
-    if _preload:
-        return
-    import threading
-
-    def run() -> None:
-        try:
-            import pyvista  # noqa: F401
-            import pyvistaqt  # noqa: F401
-        except Exception:  # reported when the view is created
-            pass
-
-    t = threading.Thread(target=run, name="preload-pyvista", daemon=True)
-    _preload.append(t)
-    t.start()
-
-
 class FrustaView(QWidget):
     def __init__(self, parent=None) -> None:
         super().__init__(parent)

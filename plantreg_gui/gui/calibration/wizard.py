@@ -22,7 +22,6 @@ from . import jobs
 from .capture_page import CapturePage
 from .depth_page import DepthPage
 from .extrinsics_page import ExtrinsicsPage
-from .frusta_view import preload as preload_3d
 from .intrinsics_page import IntrinsicsPage
 from .model import WizardModel
 from .review_page import ReviewPage
@@ -152,7 +151,6 @@ class CalibrationWizard(QWidget):
             from ...core.process_job import warm_up
 
             warm_up()  # the calibration's process starts importing while corners are detected
-            preload_3d()  # and the 3D view's libraries on a thread, not on the GUI thread later
             self._ensure(("detect",))
 
     def go_to_page(self, n: int) -> None:
