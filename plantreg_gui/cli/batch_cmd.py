@@ -24,7 +24,7 @@ from ..core.errors import InputError
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     from . import finite_float, nonempty_path
-    from .register_cmd import add_output_options
+    from .register_cmd import add_output_options, add_registration_options
 
     p = sub.add_parser(
         "batch",
@@ -42,8 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on a Dask distributed cluster (e.g. tcp://host:8786) instead of local processes; "
                    "the workers must see the same file system")
-    p.add_argument("--edge-angle", type=finite_float, default=None, metavar="DEG",
-                   help="mesh edge-cut angle in degrees (default 15, as in the paper)")
+    add_registration_options(p)
     add_output_options(p)
     p.add_argument("--overwrite", action="store_true",
                    help="register every recording again, replacing existing output folders")
@@ -87,23 +86,12 @@ class _Progress:
 def run(args: argparse.Namespace) -> int:
     from ..core import batch
     from ..core.export import check_output_spares_inputs, parse_outputs
-    from ..core.register import RegistrationParams
-    from ..core.rig import Rig
+    from .register_cmd import load_rig_for_target, registration_params
 
     rig_path = args.rig.absolute()
-    rig = Rig.load(rig_path)
-    try:
-        rig.depth()
-    except InputError as e:
-        raise InputError(f"{e.detail}; registration needs a depth camera", rig_path) from None
-    if args.target not in rig.names:
-        raise InputError(f"unknown target camera '{args.target}'; the rig has {', '.join(rig.names)}", rig_path)
+    rig = load_rig_for_target(rig_path, args.target)
     what = parse_outputs(args.outputs)
-    params = RegistrationParams()
-    if args.edge_angle is not None:
-        if not 0.0 < args.edge_angle < 90.0:
-            raise InputError(f"--edge-angle must be between 0 and 90 degrees, got {args.edge_angle:g}")
-        params.edge_angle_deg = float(args.edge_angle)
+    params = registration_params(args)
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be at least 1, got {args.workers}")
     out = args.out.absolute()

@@ -37,22 +37,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="recording folder (with recording.json)")
     p.add_argument("--target", required=True, metavar="NAME", help="name of the target camera")
     p.add_argument("--out", required=True, type=nonempty_path, metavar="OUT", help="output folder (must not exist or be empty)")
-    p.add_argument("--edge-angle", type=finite_float, default=None, metavar="DEG",
-                   help="mesh edge-cut angle in degrees (default 15, as in the paper)")
-    tof = p.add_argument_group("time-of-flight depth clean-up and mixed pixels (docs/registration.md)")
-    fly = tof.add_mutually_exclusive_group()
-    fly.add_argument("--no-flying-filter", action="store_true",
-                     help="keep flying pixels (depths between two surfaces) as measured")
-    fly.add_argument("--remove-flying", action="store_true",
-                     help="remove flying pixels instead of moving them onto the surface they mostly saw")
-    tof.add_argument("--flying-jump", type=finite_float, default=None, metavar="REL",
-                     help="a depth jump between neighbours counts above REL x depth (default 0.01: 1 cm at 1 m)")
-    tof.add_argument("--no-denoise", action="store_true", help="no edge-preserving depth denoising")
-    tof.add_argument("--denoise-size", type=int, default=None, metavar="N",
-                     help="window of the same-surface plane fit, depth pixels, odd (default 3)")
-    tof.add_argument("--mixed-radius", type=finite_float, default=None, metavar="PX",
-                     help="mixed-pixel flag: source pixels around a silhouette, before adding 2 x the "
-                          "camera's blur_px (default 1)")
+    add_registration_options(p)
+    tof = p.add_argument_group("mixed pixels in the outputs")
     tof.add_argument("--drop-mixed", action="store_true",
                      help="write NaN instead of the registered value where a pixel is flagged mixed")
     add_output_options(p)
@@ -72,31 +58,69 @@ def add_output_options(p: argparse.ArgumentParser) -> None:
                    "floating-point predictor; zstd is faster but not read by ImageJ/Fiji)")
 
 
-def run(args: argparse.Namespace) -> int:
-    from .. import cli
-    from ..core.export import check_output_spares_inputs, parse_outputs, write_outputs
-    from ..core.imageio import check_output_location
-    from ..core.recording import Recording
-    from ..core.register import AREA_P4, AREA_P5, AREA_P6, Registrar, RegistrationParams
+def add_registration_options(p: argparse.ArgumentParser) -> None:
+    """The registration parameters ``plantreg register`` and ``plantreg batch`` share
+    (read back by :func:`registration_params`)."""
+    from . import finite_float
+
+    p.add_argument("--edge-angle", type=finite_float, default=None, metavar="DEG",
+                   help="mesh edge-cut angle in degrees (default 15, as in the paper)")
+    tof = p.add_argument_group("time-of-flight depth clean-up and mixed pixels (docs/registration.md)")
+    fly = tof.add_mutually_exclusive_group()
+    fly.add_argument("--no-flying-filter", action="store_true",
+                     help="keep flying pixels (depths between two surfaces) as measured")
+    fly.add_argument("--remove-flying", action="store_true",
+                     help="remove flying pixels instead of moving them onto the surface they mostly saw")
+    tof.add_argument("--flying-jump", type=finite_float, default=None, metavar="REL",
+                     help="a depth jump between neighbours counts above REL x depth (default 0.01: 1 cm at 1 m)")
+    tof.add_argument("--no-denoise", action="store_true", help="no edge-preserving depth denoising")
+    tof.add_argument("--denoise-size", type=int, default=None, metavar="N",
+                     help="window of the same-surface plane fit, depth pixels, odd (default 3)")
+    tof.add_argument("--mixed-radius", type=finite_float, default=None, metavar="PX",
+                     help="mixed-pixel flag: source pixels around a silhouette, before adding 2 x the "
+                          "camera's blur_px (default 1)")
+
+
+def load_rig_for_target(rig_path: Path, target: str):
+    """The rig at ``rig_path``, checked to have a depth camera and a camera ``target``."""
     from ..core.rig import Rig
 
-    rig_path: Path = args.rig
-    out: Path = args.out
     rig = Rig.load(rig_path)
     # the rig's own errors do not know its file name: add it
     try:
         rig.depth()
     except InputError as e:
         raise InputError(f"{e.detail}; registration needs a depth camera", rig_path) from None
-    if args.target not in rig.names:
-        raise InputError(f"unknown target camera '{args.target}'; the rig has {', '.join(rig.names)}", rig_path)
-    what = parse_outputs(args.outputs)
+    if target not in rig.names:
+        raise InputError(f"unknown target camera '{target}'; the rig has {', '.join(rig.names)}", rig_path)
+    return rig
+
+
+def registration_params(args: argparse.Namespace):
+    """:class:`RegistrationParams` from the options of :func:`add_registration_options`."""
+    from ..core.register import RegistrationParams
+
     params = RegistrationParams()
     if args.edge_angle is not None:
         if not 0.0 < args.edge_angle < 90.0:
             raise InputError(f"--edge-angle must be between 0 and 90 degrees, got {args.edge_angle:g}")
         params.edge_angle_deg = float(args.edge_angle)
     _tof_params(args, params)
+    return params
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import cli
+    from ..core.export import check_output_spares_inputs, parse_outputs, write_outputs
+    from ..core.imageio import check_output_location
+    from ..core.recording import Recording
+    from ..core.register import AREA_P4, AREA_P5, AREA_P6, Registrar
+
+    rig_path: Path = args.rig
+    out: Path = args.out
+    rig = load_rig_for_target(rig_path, args.target)
+    what = parse_outputs(args.outputs)
+    params = registration_params(args)
     # fail before the long work, not after it: the output location (free or --overwrite, not an
     # input, writable), then the recording (names, then every image's header and size)
     check_output_spares_inputs(out, [rig_path, args.recording])
