@@ -130,22 +130,28 @@ class Worker(QObject):
     def _on_finished(self, result: object) -> None:
         self._thread.quit()
         self._thread.wait()
-        self.finished.emit(result)
-        self._end()
+        try:  # a slot that raises must not leave the job running forever (no done())
+            self.finished.emit(result)
+        finally:
+            self._end()
 
     @Slot(str, str)
     def _on_failed(self, message: str, details: str) -> None:
         self._thread.quit()
         self._thread.wait()
-        self.failed.emit(message, details)
-        self._end()
+        try:  # a slot that raises must not leave the job running forever (no done())
+            self.failed.emit(message, details)
+        finally:
+            self._end()
 
     @Slot()
     def _on_cancelled(self) -> None:
         self._thread.quit()
         self._thread.wait()
-        self.cancelled.emit()
-        self._end()
+        try:
+            self.cancelled.emit()
+        finally:
+            self._end()
 
 
 #: (title, message) of every error shown: an unattended ``--screenshot`` run reports them and
