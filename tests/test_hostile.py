@@ -386,6 +386,15 @@ BAD_REGISTER = [
 ]
 
 
+def _assert_refused(code: int, err: str, culprit, words) -> None:
+    """Exit 1 and exactly one line on stderr naming ``culprit`` and every word of ``words``."""
+    assert code == 1, err
+    assert str(culprit) in err, err
+    for w in words:
+        assert w in err, err
+    assert "Traceback" not in err and "Exception ignored" not in err and len(err.strip().splitlines()) == 1, err
+
+
 def _no_leftovers(folder: Path) -> list[str]:
     return [p.name for p in folder.iterdir() if ".part" in p.name or p.name.endswith(".old") or ".old." in p.name]
 
@@ -403,12 +412,7 @@ def test_register_refuses_before_any_work(tmp_path, capsys, monkeypatch, breaker
     out = tmp_path / "out"
     code = cli.main(["register", "--rig", str(rig), "--recording", str(rec), "--target", "ir", "--out", str(out),
                      "--quiet"])
-    err = capsys.readouterr().err
-    assert code == 1, err
-    assert str(culprit) in err, err
-    for w in words:
-        assert w in err, err
-    assert "Traceback" not in err and "Exception ignored" not in err and len(err.strip().splitlines()) == 1, err
+    _assert_refused(code, capsys.readouterr().err, culprit, words)
     assert not os.path.lexists(out) and not _no_leftovers(tmp_path)
 
 
@@ -873,12 +877,7 @@ def test_batch_refuses_a_bad_rig_before_any_work(tmp_path, capsys, monkeypatch, 
     monkeypatch.setattr(batch_mod, "run", never)
     out = tmp_path / "out"
     code = cli.main(["batch", "--rig", str(rig), "--target", "ir", "--out", str(out), "--quiet", str(rec)])
-    err = capsys.readouterr().err
-    assert code == 1, err
-    assert str(culprit) in err, err
-    for w in words:
-        assert w in err, err
-    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    _assert_refused(code, capsys.readouterr().err, culprit, words)
     assert not os.path.lexists(out) and not _no_leftovers(tmp_path)
 
 

@@ -286,22 +286,21 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
     for cam in cams:
         dtype += [(p, "<f4") for p in names[cam]]
     used = {d[0] for d in dtype}
-    case_props: dict[str, str] = {}
-    for cam in result.cases:
-        p = f"{_ply_name(cam)}_case"
-        while p in used:
-            p += "_"
-        used.add(p)
-        case_props[cam] = p
-        dtype.append((p, "u1"))
-    mixed_props: dict[str, str] = {}
-    for cam in getattr(result, "mixed", {}):
-        p = f"{_ply_name(cam)}_mixed"
-        while p in used:
-            p += "_"
-        used.add(p)
-        mixed_props[cam] = p
-        dtype.append((p, "u1"))
+
+    def flag_props(cams_: Iterable[str], suffix: str) -> dict[str, str]:
+        """One uint8 property per camera, named ``<cam>_<suffix>`` and made unique."""
+        props: dict[str, str] = {}
+        for cam in cams_:
+            p = f"{_ply_name(cam)}_{suffix}"
+            while p in used:
+                p += "_"
+            used.add(p)
+            props[cam] = p
+            dtype.append((p, "u1"))
+        return props
+
+    case_props = flag_props(result.cases, "case")
+    mixed_props = flag_props(getattr(result, "mixed", {}), "mixed")
     dt = np.dtype(dtype)  # packed records, the PLY binary layout
     comment = (f"plantreg {__version__}: object-mesh hits of target '{result.target}' rays, "
                f"rig frame, metres; target image {W}x{H}")
