@@ -33,7 +33,7 @@ import numpy as np
 from .. import __version__
 from . import display, modality
 from .errors import InputError
-from .imageio import (TIFF_CODEC_DEFAULT, atomic_output_dir, atomic_path_suffixed, atomic_write_text,
+from .imageio import (TIFF_CODEC_DEFAULT, atomic_output_dir, atomic_path, atomic_write_text,
                       dense_tiles, write_png, write_tiff_tiled)
 from .progress import Reporter, ensure_reporter
 from .recording import Recording
@@ -311,7 +311,7 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
     # records are packed and written in chunks of ~64 MB: a 4K target's hits with 204 bands
     # would otherwise need the whole cloud (and its values) in memory twice
     step = max(1024, (64 << 20) // dt.itemsize)
-    with atomic_path_suffixed(path) as tmp:
+    with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
             f.write(("\n".join(header) + "\n").encode("ascii"))
             for a in range(0, n, step):

@@ -404,10 +404,6 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         raise
 
 
-#: The same as :func:`atomic_path` (kept for callers that want to say the suffix matters).
-atomic_path_suffixed = atomic_path
-
-
 def atomic_write_text(path: str | Path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
@@ -421,7 +417,7 @@ def write_png(path: str | Path, img: np.ndarray) -> None:
     ok, buf = cv2.imencode(".png", img)
     if not ok:
         raise OSError(errno.EINVAL, "PNG encoder failed", str(path))
-    with atomic_path_suffixed(path) as tmp:
+    with atomic_path(path) as tmp:
         tmp.write_bytes(buf.tobytes())  # written by Python: a full disk is an OSError naming the file
 
 
@@ -440,7 +436,7 @@ def write_tiff(path: str | Path, img: np.ndarray) -> None:
         kw["planarconfig"] = "contig"
         if a.shape[2] == 3 and a.dtype == np.uint8:
             kw["photometric"] = "rgb"
-    with atomic_path_suffixed(path) as tmp:
+    with atomic_path(path) as tmp:
         tifffile.imwrite(tmp, a, **kw)
 
 
@@ -706,7 +702,7 @@ def write_tiff_tiled(path: str | Path, shape: tuple[int, ...], dtype, tile_of, *
         kw["planarconfig"] = "contig"
     if predictor != 1:
         kw["predictor"] = predictor
-    with atomic_path_suffixed(path) as tmp:
+    with atomic_path(path) as tmp:
         tifffile.imwrite(tmp, data=encoded(), shape=(H, W, C) if len(shape) > 2 else (H, W), dtype=dtype,
                          tile=(edge, edge), compression=compression, **kw)
 

@@ -168,11 +168,11 @@ def _manifest_entries(m: Any, manifest: Path) -> dict[str | None, Path]:
 
 
 def _write_any(path: Path, img: np.ndarray) -> None:
-    from .imageio import atomic_path_suffixed, write_png, write_tiff
+    from .imageio import atomic_path, write_png, write_tiff
 
     s = path.suffix.lower()
     if s == ".npy":
-        with atomic_path_suffixed(path) as tmp:
+        with atomic_path(path) as tmp:
             np.save(tmp, img)
     elif s == ".png":
         write_png(path, img)

@@ -341,7 +341,7 @@ class GroundTruth:
 
     def save(self, path: str | Path) -> None:
         """Write a compressed ``.npz`` (keys ``uv/<src>``, ``visible/<src>``, ...), atomically."""
-        from ..imageio import atomic_path_suffixed
+        from ..imageio import atomic_path
 
         arrays: dict[str, np.ndarray] = {
             "target": np.array(self.target), "points_rig": self.points_rig, "material": self.material,
@@ -350,7 +350,7 @@ class GroundTruth:
         for key in ("uv", "in_image", "visible", "matchable"):
             for src, a in getattr(self, key).items():
                 arrays[f"{key}/{src}"] = a
-        with atomic_path_suffixed(path) as tmp:
+        with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
                 np.savez_compressed(f, **arrays)
 

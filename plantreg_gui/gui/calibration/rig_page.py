@@ -15,7 +15,8 @@ from ...core import modality
 from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
-MODALITIES = ["infrared", "visible", "thermal", "hyperspectral", "multispectral", "depth"]
+#: the modality chooser offers the registry's canonical names (an alias typed in is canonicalised on save)
+MODALITIES = modality.names()
 DICTIONARIES = ["DICT_4X4_50", "DICT_4X4_100", "DICT_4X4_250", "DICT_5X5_100", "DICT_5X5_250",
                 "DICT_6X6_250", "DICT_7X7_250", "DICT_ARUCO_ORIGINAL"]
 
@@ -97,7 +98,7 @@ class RigPage(WizardPage):
         hb = QHBoxLayout()
         add = QPushButton("Add camera")
         rem = QPushButton("Remove camera")
-        add.clicked.connect(lambda: self._add_camera(f"camera{self.cameras.rowCount() + 1}", "visible"))
+        add.clicked.connect(lambda: self._add_camera(f"camera{self.cameras.rowCount() + 1}", "rgb"))
         rem.clicked.connect(self._remove_camera)
         hb.addWidget(add)
         hb.addWidget(rem)
@@ -200,7 +201,7 @@ class RigPage(WizardPage):
     # ------------------------------------------------------------------ form <-> session
     def _set_defaults(self) -> None:
         self._loading = True
-        for name, mod in (("ir", "infrared"), ("rgb", "visible"), ("thermal", "thermal")):
+        for name, mod in (("ir", "infrared"), ("rgb", "rgb"), ("thermal", "thermal")):
             self._add_camera(name, mod)
         self.columns.setValue(9)
         self.rows.setValue(6)

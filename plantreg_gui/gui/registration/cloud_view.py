@@ -120,7 +120,9 @@ class CloudView(QWidget):
         # constructing the GL widget processes events; a nested render request must not build a second one
         self._creating = True
         try:
-            plotter = QtInteractor(self.host)
+            # no auto_update (as frusta_view): pyvistaqt's default re-renders 5 times a second for
+            # ever; every change here calls render() itself and the interactor renders while rotating
+            plotter = QtInteractor(self.host, auto_update=False)
         finally:
             self._creating = False
         self.plotter = plotter
