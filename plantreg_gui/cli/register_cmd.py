@@ -50,9 +50,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def add_output_options(p: argparse.ArgumentParser) -> None:
     """The output options ``plantreg register`` and ``plantreg batch`` share."""
+    # the parts are core.export.OUTPUT_PARTS; not listed here: importing it would slow every --help by 0.3 s
     p.add_argument("--outputs", default=None, metavar="PARTS",
-                   help="comma-separated parts of the output to write: registered,cases,areas,ply,previews,"
-                   "mosaic,summary (default: all)")
+                   help="comma-separated parts of the output to write, e.g. registered,cases,ply (default: "
+                   "all; an unknown name lists every part)")
     p.add_argument("--tiff-codec", default="deflate-fp", choices=("deflate-fp", "deflate", "zstd"),
                    help="lossless compression of the registered TIFFs (default deflate-fp: deflate with the "
                    "floating-point predictor; zstd is faster but not read by ImageJ/Fiji)")

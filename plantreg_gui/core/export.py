@@ -26,7 +26,8 @@ import platform
 import re
 import time
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -44,28 +45,147 @@ from .rig import Rig
 SUMMARY_FORMAT = "plantreg.summary"
 SUMMARY_VERSION = 2  # 2: "tof" (flying pixels, mixed-pixel flags), parameters of the depth clean-up
 
-#: Selectable parts of the output (``what``): float TIFFs, display PNGs, case maps, area map,
-#: point cloud, mosaic, summary.
-OUTPUTS = ("registered", "previews", "cases", "edges", "areas", "pointcloud", "mosaic", "summary")
+# ---------------------------------------------------------------------- the output parts (one registry)
+@dataclass
+class ExportContext:
+    """What every part's writer gets: the temporary output ``folder``, the result, its ``cams``
+    (target first), ``preview(cam)`` (the display rendering, computed once), the options, and
+    the bookkeeping the summary reports (``written`` relative paths, ``timings``)."""
 
-#: Other names accepted by :func:`parse_outputs` (the command line says ``ply``).
-OUTPUT_ALIASES = {"ply": "pointcloud"}
+    folder: Path
+    result: RegistrationResult
+    rig: Rig
+    recording: Recording | None
+    cams: list[str]
+    preview: Callable[[str], np.ndarray]
+    tiff_codec: str
+    mosaic_tile: int | None
+    inputs: dict[str, Any] | None
+    t_start: float
+    written: list[str] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class OutputPart:
+    """One selectable part of the output. ``steps(result, cams)`` -> ``[("kind[:camera]", weight)]``
+    (weights: rough relative cost, so the progress bar moves evenly); ``write(ctx, kind, camera,
+    progress)`` writes one step into ``ctx.folder`` and returns its relative path. ``label`` is
+    what the GUI's export dialog says; ``cli`` the name ``--outputs`` lists (default ``key``)."""
+
+    key: str
+    label: str
+    steps: Callable[[RegistrationResult, list[str]], list[tuple[str, float]]]
+    write: Callable[[ExportContext, str, str, Reporter], str]
+    cli: str = ""
+
+
+def _write_registered(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
+    rel = f"registered/{_safe(cam)}.tif"
+    reg = ctx.result.registered[cam]  # tiled, compressed, empty tiles encoded once
+    if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
+        write_tiff_tiled(ctx.folder / rel, reg.shape, np.float32, reg.block, codec=ctx.tiff_codec)
+    else:
+        reg = np.asarray(reg, dtype=np.float32)
+        write_tiff_tiled(ctx.folder / rel, reg.shape, np.float32, dense_tiles(reg), codec=ctx.tiff_codec)
+    return rel
+
+
+def _write_preview(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
+    rel = f"registered/{_safe(cam)}.png"
+    write_png(ctx.folder / rel, ctx.preview(cam))
+    return rel
+
+
+def _write_cases(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
+    rel = f"cases/{_safe(cam)}.png"
+    write_png(ctx.folder / rel, np.asarray(ctx.result.cases[cam], dtype=np.uint8))
+    return rel
+
+
+def _write_areas(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
+    write_png(ctx.folder / "areas.png", np.asarray(ctx.result.area, dtype=np.uint8))
+    return "areas.png"
+
+
+def _write_pointcloud(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
+    colour_cam = _colour_camera(ctx.result, ctx.rig)
+    write_ply(ctx.folder / "pointcloud.ply", ctx.result, ctx.cams,
+              None if colour_cam is None else ctx.preview(colour_cam), rep)
+    return "pointcloud.ply"
+
+
+def _write_mosaic(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
+    tile = ctx.mosaic_tile or display.default_tile(ctx.result.shape)
+    write_png(ctx.folder / "mosaic.png", display.mosaic([ctx.preview(c) for c in ctx.cams], tile))
+    return "mosaic.png"
+
+
+def _write_summary(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
+    ctx.timings["total"] = time.perf_counter() - ctx.t_start
+    summary = build_summary(ctx.result, ctx.rig, ctx.recording, ctx.inputs, export_timings=ctx.timings,
+                            files=ctx.written + ["summary.json"])
+    atomic_write_text(ctx.folder / "summary.json", json.dumps(summary, indent=2, allow_nan=False) + "\n")
+    return "summary.json"
+
+
+#: The parts of the output, in writing order: the one place an output is declared. The command
+#: line's ``--outputs``, the GUI's export dialog and the progress weights all read it; adding an
+#: output = one :class:`OutputPart` here (the summary stays last: it lists the files written).
+OUTPUT_PARTS: tuple[OutputPart, ...] = (
+    OutputPart("registered", "Registered images (float32 TIFF, NaN = not mapped)",
+               lambda r, cams: [(f"registered:{c}", 1.0 + 0.02 * _bands(r.registered[c])) for c in cams],
+               _write_registered),
+    OutputPart("previews", "Display previews (PNG, as shown here)",
+               lambda r, cams: [(f"previews:{c}", 1.0 + 0.01 * _bands(r.registered[c])) for c in cams],
+               _write_preview),
+    OutputPart("cases", "Case masks per source (PNG, codes 0-6)",
+               lambda r, cams: [(f"cases:{c}", 0.3) for c in r.cases], _write_cases),
+    OutputPart("edges", "Mixed edge pixels per source (PNG mask)",
+               lambda r, cams: edge_steps(r), lambda ctx, kind, cam, rep: write_edge_step(ctx.folder, ctx.result, kind, cam)),
+    OutputPart("areas", "Area mask of the target (PNG, codes 4-6)", lambda r, cams: [("areas", 0.3)], _write_areas),
+    OutputPart("pointcloud", "Point cloud with every modality's values (PLY)",
+               lambda r, cams: [("pointcloud", 2.0 + 0.05 * sum(_bands(r.registered[c]) for c in cams))],
+               _write_pointcloud, cli="ply"),
+    # a recording with a depth map only has nothing to tile
+    OutputPart("mosaic", "Mosaic of all modalities (PNG)", lambda r, cams: [("mosaic", 1.0)] if cams else [],
+               _write_mosaic),
+    OutputPart("summary", "Summary: inputs, parameters, case counts, timings (JSON)",
+               lambda r, cams: [("summary", 0.0)], _write_summary),
+)
+
+#: Selectable parts of the output (``what``), in writing order (from :data:`OUTPUT_PARTS`).
+OUTPUTS = tuple(p.key for p in OUTPUT_PARTS)
+
+def output_choices() -> str:
+    """The part names the command line's ``--outputs`` takes, comma-separated."""
+    return ",".join(p.cli or p.key for p in OUTPUT_PARTS)
+
+
+def _keys() -> tuple[str, ...]:
+    return tuple(p.key for p in OUTPUT_PARTS)  # read at call time: the registry is the truth
+
+
+def _alias(word: str) -> str:
+    return next((p.key for p in OUTPUT_PARTS if word == p.cli), word)
 
 
 def parse_outputs(text: str | Iterable[str] | None) -> tuple[str, ...]:
-    """``"registered,cases,ply"`` (or a list) -> the :data:`OUTPUTS` parts, in :data:`OUTPUTS` order;
+    """``"registered,cases,ply"`` (or a list) -> the :data:`OUTPUT_PARTS` keys, in registry order;
     None or ``"all"`` -> all. Unknown names raise :class:`InputError`."""
+    keys = _keys()
     if text is None:
-        return OUTPUTS
+        return keys
     words = [w.strip() for w in (text.split(",") if isinstance(text, str) else text) if w.strip()]
     if words == ["all"]:
-        return OUTPUTS
-    parts = {OUTPUT_ALIASES.get(w, w) for w in words}
-    unknown = sorted(w for w in words if OUTPUT_ALIASES.get(w, w) not in OUTPUTS)
+        return keys
+    parts = {_alias(w) for w in words}
+    unknown = sorted(w for w in words if _alias(w) not in keys)
     if unknown or not parts:
-        choices = ",".join(["registered", "cases", "edges", "areas", "ply", "previews", "mosaic", "summary"])
-        raise InputError(f"--outputs: unknown part(s) {', '.join(unknown) or '(none given)'}; choose from {choices} or all")
-    return tuple(o for o in OUTPUTS if o in parts)
+        raise InputError(f"--outputs: unknown part(s) {', '.join(unknown) or '(none given)'}; "
+                         f"choose from {output_choices()} or all")
+    return tuple(o for o in keys if o in parts)
+
 
 #: PLY vertex properties that are not camera values.
 _PLY_FIXED = ("x", "y", "z", "red", "green", "blue", "row", "col")
@@ -100,18 +220,15 @@ def write_outputs(
     left at ``out`` then).
     """
     rep = ensure_reporter(progress)
-    sel = set(OUTPUTS) if what is None else {OUTPUT_ALIASES.get(w, w) for w in what}
-    unknown = sel - set(OUTPUTS)
+    sel = set(_keys()) if what is None else {_alias(w) for w in what}
+    unknown = sel - set(_keys())
     if unknown:
-        raise ValueError(f"unknown output parts {sorted(unknown)}; choose from {OUTPUTS}")
+        raise ValueError(f"unknown output parts {sorted(unknown)}; choose from {_keys()}")
     out = Path(out)
     t_start = time.perf_counter()
-    timings: dict[str, float] = {}
     cams = _camera_order(result, rig)
     _check_file_names(list(dict.fromkeys([*cams, *result.cases])))
-    H, W = result.shape
     opts = {k: dict(v) for k, v in (display_options or {}).items()}
-    written: list[str] = []
     previews: dict[str, np.ndarray] = {}
 
     def preview(cam: str) -> np.ndarray:
@@ -120,23 +237,9 @@ def write_outputs(
                                             **opts.get(cam, {}))
         return previews[cam]
 
-    # steps with rough weights so the progress bar moves evenly
-    steps: list[tuple[str, float]] = []
-    if "registered" in sel:
-        steps += [(f"registered:{c}", 1.0 + 0.02 * _bands(result.registered[c])) for c in cams]
-    if "previews" in sel:
-        steps += [(f"previews:{c}", 1.0 + 0.01 * _bands(result.registered[c])) for c in cams]
-    if "cases" in sel:
-        steps += [(f"cases:{c}", 0.3) for c in result.cases]
-    if "edges" in sel:
-        steps += edge_steps(result)
-    if "areas" in sel:
-        steps.append(("areas", 0.3))
-    if "pointcloud" in sel:
-        steps.append(("pointcloud", 2.0 + 0.05 * sum(_bands(result.registered[c]) for c in cams)))
-    if "mosaic" in sel and cams:  # a recording with a depth map only has nothing to tile
-        steps.append(("mosaic", 1.0))
-    total = sum(w for _, w in steps) or 1.0
+    # (part, step, weight) in OUTPUT_PARTS order; the weights make the progress bar move evenly
+    steps = [(part, step, w) for part in OUTPUT_PARTS if part.key in sel for step, w in part.steps(result, cams)]
+    total = sum(w for _, _, w in steps) or 1.0
 
     keep: list[Path] = [Path(v) for k, v in (inputs or {}).items()
                         if isinstance(v, Path) or (k == "rig" and isinstance(v, str))]
@@ -144,49 +247,17 @@ def write_outputs(
         keep += [Path(recording.folder), *map(Path, recording.paths.values())]
     check_output_spares_inputs(out, keep)
     with atomic_output_dir(out, overwrite) as tmp:
+        ctx = ExportContext(tmp, result, rig, recording, cams, preview, tiff_codec, mosaic_tile, inputs, t_start)
         done = 0.0
-        for step, weight in steps:
+        for part, step, weight in steps:
             kind, _, cam = step.partition(":")
             rep(done / total, f"writing {_step_label(kind, cam)}")
             t0 = time.perf_counter()
-            if kind == "registered":
-                rel = f"registered/{_safe(cam)}.tif"
-                reg = result.registered[cam]  # tiled, compressed, empty tiles encoded once
-                if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
-                    write_tiff_tiled(tmp / rel, reg.shape, np.float32, reg.block, codec=tiff_codec)
-                else:
-                    reg = np.asarray(reg, dtype=np.float32)
-                    write_tiff_tiled(tmp / rel, reg.shape, np.float32, dense_tiles(reg), codec=tiff_codec)
-            elif kind == "previews":
-                rel = f"registered/{_safe(cam)}.png"
-                write_png(tmp / rel, preview(cam))
-            elif kind == "cases":
-                rel = f"cases/{_safe(cam)}.png"
-                write_png(tmp / rel, np.asarray(result.cases[cam], dtype=np.uint8))
-            elif kind in ("edges", "flying"):
-                rel = write_edge_step(tmp, result, kind, cam)
-            elif kind == "areas":
-                rel = "areas.png"
-                write_png(tmp / rel, np.asarray(result.area, dtype=np.uint8))
-            elif kind == "pointcloud":
-                rel = "pointcloud.ply"
-                colour_cam = _colour_camera(result, rig)
-                write_ply(tmp / rel, result, cams, None if colour_cam is None else preview(colour_cam),
-                          rep.sub(done / total, (done + weight) / total))
-            elif kind == "mosaic":
-                rel = "mosaic.png"
-                write_png(tmp / rel, display.mosaic([preview(c) for c in cams], mosaic_tile or display.default_tile((H, W))))
-            else:  # pragma: no cover - steps are built above
-                raise AssertionError(step)
-            timings[kind] = timings.get(kind, 0.0) + time.perf_counter() - t0
-            written.append(rel)
+            rel = part.write(ctx, kind, cam, rep.sub(done / total, (done + weight) / total))
+            if kind != "summary":  # the summary holds the timings: it is written last, untimed
+                ctx.timings[kind] = ctx.timings.get(kind, 0.0) + time.perf_counter() - t0
+            ctx.written.append(rel)
             done += weight
-        if "summary" in sel:
-            rep(done / total, "writing summary.json")
-            timings["total"] = time.perf_counter() - t_start
-            summary = build_summary(result, rig, recording, inputs, export_timings=timings,
-                                    files=written + ["summary.json"])
-            atomic_write_text(tmp / "summary.json", json.dumps(summary, indent=2, allow_nan=False) + "\n")
         rep.check()  # a cancel during the last file still leaves nothing behind
     if not rep.cancel.cancelled:  # the folder is complete now: a late cancel changes nothing
         rep(1.0, f"wrote {out}")
@@ -528,7 +599,8 @@ def _step_label(kind: str, cam: str) -> str:
     return {"registered": f"registered/{cam}.tif", "previews": f"registered/{cam}.png",
             "cases": f"cases/{cam}.png", "edges": f"cases/{cam}_edge.png"}.get(
         kind, {"areas": "areas.png", "pointcloud": "pointcloud.ply", "flying": "flying.png",
-               "mosaic": "mosaic.png"}.get(kind, kind))
+               "mosaic": "mosaic.png", "summary": "summary.json"}.get(kind, kind))
 
 
-__all__ = ["OUTPUTS", "write_outputs", "write_ply", "build_summary", "ply_property_names"]
+__all__ = ["OUTPUTS", "OUTPUT_PARTS", "OutputPart", "parse_outputs", "write_outputs", "write_ply", "build_summary",
+           "ply_property_names"]

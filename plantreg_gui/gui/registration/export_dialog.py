@@ -10,24 +10,11 @@ from PySide6.QtWidgets import (
     QPushButton, QVBoxLayout, QWidget,
 )
 
-#: labels of the output parts; a part the core adds without a label here is still offered
-_LABELS = {
-    "registered": "Registered images (float32 TIFF, NaN = not mapped)",
-    "previews": "Display previews (PNG, as shown here)",
-    "cases": "Case masks per source (PNG, codes 0-6)",
-    "edges": "Mixed edge pixels per source (PNG mask)",
-    "areas": "Area mask of the target (PNG, codes 4-6)",
-    "pointcloud": "Point cloud with every modality's values (PLY)",
-    "mosaic": "Mosaic of all modalities (PNG)",
-    "summary": "Summary: inputs, parameters, case counts, timings (JSON)",
-}
-
-
 def parts() -> dict[str, str]:
-    """Output part (every one of core.export.OUTPUTS, in its order) -> label shown to the user."""
-    from ...core.export import OUTPUTS  # on demand: the export module pulls in the registration engine
+    """Output part -> label shown to the user, from the core's one registry (core.export.OUTPUT_PARTS)."""
+    from ...core.export import OUTPUT_PARTS  # on demand: the export module pulls in the registration engine
 
-    return {k: _LABELS.get(k, k) for k in OUTPUTS}
+    return {p.key: p.label for p in OUTPUT_PARTS}
 
 
 def folder_is_nonempty(path: str | Path) -> bool:
