@@ -29,3 +29,88 @@ def test_export_dialog_offers_the_registry(qapp, no_qt_leaks, monkeypatch):
         assert dlg.what() == list(export.OUTPUTS) + ["extra"]
     finally:
         dlg.deleteLater()
+
+
+# ---------------------------------------------------------------------- region tool
+def _drag(qtbot, view, a, b):
+    """Press at scene point ``a``, move, release at ``b`` (image pixel coordinates)."""
+    from PySide6.QtCore import QPointF, Qt
+
+    pa, pb = (view.mapFromScene(QPointF(*p)) for p in (a, b))
+    qtbot.mousePress(view.viewport(), Qt.MouseButton.LeftButton, pos=pa)
+    qtbot.mouseMove(view.viewport(), pos=pb)
+    qtbot.mouseRelease(view.viewport(), Qt.MouseButton.LeftButton, pos=pb)
+    return pa, pb
+
+
+def test_region_rectangle_gives_the_sources_statistics_and_csv(registered_workspace, qtbot, tmp_path):
+    import csv
+
+    from plantreg_gui.core.cases import Case
+
+    ws = registered_workspace
+    s = ws.session
+    r = s.result
+    ws.region_panel.set_tool("rect")
+    assert ws.current_view() == "side-by-side"
+    ws.region_panel.source.setCurrentText("thermal")
+    assert s.masks_source == "thermal"
+    view = ws.sbs_grid.views[r.target].view
+    x0, y0, x1, y1 = s.home  # the object's box: the region holds leaves and background
+    pa, pb = _drag(qtbot, view, (x0, y0), (x1, y1))
+    qtbot.waitUntil(lambda: s.region_stats is not None, timeout=2000)
+    # the rectangle is where the mouse went (to a view pixel): check against the truth computed here
+    a, b = view.mapToScene(pa), view.mapToScene(pb)
+    mask = np.zeros(r.shape, bool)
+    rr, cc = np.mgrid[0:r.shape[0], 0:r.shape[1]]
+    mask[(cc + 0.5 >= a.x()) & (cc + 0.5 < b.x()) & (rr + 0.5 >= a.y()) & (rr + 0.5 < b.y())] = True
+    st = s.region_stats
+    assert st.source == "thermal" and st.pixels == mask.sum()
+    codes = r.cases["thermal"][mask]
+    assert st.cases["P1"][0] == np.sum(codes == Case.P1) and st.cases["P2"][0] == np.sum(codes == Case.P2)
+    use = (codes == Case.P1) & ~r.mixed["thermal"][mask]
+    vals = np.asarray(r.registered["thermal"])[mask][use]
+    vals = vals[np.isfinite(vals)]
+    assert st.trusted == vals.size > 100
+    assert st.mean[0] == pytest.approx(vals.mean(), abs=1e-4)  # mean leaf temperature
+    assert "°C" in ws.region_panel.text.text() and f"{vals.mean():.2f}" in ws.region_panel.text.text()
+    # every view outlines the region
+    assert all(tv.view._region.isVisible() for tv in ws.sbs_grid.views.values())
+    # another source: the statistics follow
+    ws.region_panel.source.setCurrentText("rgb")
+    assert s.region_stats.source == "rgb" and s.region_stats.bands == 3
+    out = ws.region_panel.save_csv(tmp_path / "region.csv")
+    rows = list(csv.DictReader(out.open()))
+    therm = [row for row in rows if row["source"] == "thermal" and row["statistic"] == "mean"]
+    assert len(therm) == 1 and float(therm[0]["value"]) == pytest.approx(vals.mean(), abs=1e-3)
+    assert therm[0]["unit"] == "°C"
+    assert {row["source"] for row in rows} == set(r.registered)
+    ws.region_panel.clear_button.click()
+    assert s.region is None and not view._region.isVisible()
+    ws.region_panel.set_tool(None)
+    assert view.draw_mode is None
+
+
+def test_region_polygon_by_clicks(registered_workspace, qtbot):
+    from PySide6.QtCore import QPointF, Qt
+
+    from plantreg_gui.core.region import region_mask
+
+    ws = registered_workspace
+    s = ws.session
+    ws.region_panel.set_tool("polygon")
+    view = ws.sbs_grid.views[s.result.target].view
+    x0, y0, x1, y1 = s.home
+    corners = [(x0, y0), (x1, y0), ((x0 + x1) / 2, y1)]
+    for c in corners:
+        p = view.mapFromScene(QPointF(*c))
+        qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=p)
+    qtbot.mouseDClick(view.viewport(), Qt.MouseButton.LeftButton, pos=view.mapFromScene(QPointF(*corners[-1])))
+    qtbot.waitUntil(lambda: s.region is not None, timeout=2000)
+    kind, pts = s.region
+    assert kind == "polygon" and len(pts) == 3
+    for (px, py), (cx, cy) in zip(pts, corners):  # where the clicks were, to a screen pixel
+        scale = view.transform().m11()
+        assert abs(px - cx) <= 1.5 / scale + 1e-6 and abs(py - cy) <= 1.5 / scale + 1e-6
+    assert s.region_stats.pixels == region_mask(s.result.shape, polygon=pts).sum() > 0
+    ws.region_panel.set_tool(None)

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
-from PySide6.QtGui import QColor, QImage, QPainter, QPen, QPixmap, QTransform
+from PySide6.QtGui import QColor, QImage, QPainter, QPen, QPixmap, QPolygonF, QTransform
 from PySide6.QtWidgets import (
-    QFrame, QGraphicsItem, QGraphicsLineItem, QGraphicsScene, QGraphicsView, QGridLayout, QHBoxLayout, QLabel,
-    QSizePolicy, QVBoxLayout, QWidget,
+    QFrame, QGraphicsItem, QGraphicsLineItem, QGraphicsPolygonItem, QGraphicsScene, QGraphicsView, QGridLayout,
+    QHBoxLayout, QLabel, QSizePolicy, QVBoxLayout, QWidget,
 )
 
 
@@ -58,11 +58,15 @@ class ImageItem(QGraphicsItem):
 class ImageView(QGraphicsView):
     """Shows one rendering; wheel zooms about the mouse, drag pans, double-click fits.
 
-    Signals: ``hovered(row, col)`` image pixel under the mouse (-1, -1 when outside).
+    Signals: ``hovered(row, col)`` image pixel under the mouse (-1, -1 when outside);
+    ``region_drawn(kind, shape)`` when the user finished drawing a region in draw mode
+    (:meth:`set_draw_mode`): ``("rect", (x0, y0, x1, y1))`` or ``("polygon", [(x, y), ...])`` in
+    image pixel coordinates.
     """
 
     hovered = Signal(int, int)
     zoomed = Signal(object)  # QTransform
+    region_drawn = Signal(str, object)
 
     def __init__(self, title: str = "", parent: QWidget | None = None):
         super().__init__(parent)
@@ -91,6 +95,16 @@ class ImageView(QGraphicsView):
             ln.setZValue(2)
             ln.setVisible(False)
             self.scene().addItem(ln)
+        rpen = QPen(QColor(255, 230, 0))
+        rpen.setCosmetic(True)
+        rpen.setWidth(2)
+        self._region = QGraphicsPolygonItem()
+        self._region.setPen(rpen)
+        self._region.setZValue(3)
+        self._region.setVisible(False)
+        self.scene().addItem(self._region)
+        self.draw_mode: str | None = None           # None, "rect" or "polygon"
+        self._drawing: list[QPointF] = []           # corners while drawing
         self.array: np.ndarray | None = None       # the (H, W, 3) uint8 shown
         self.overlay: np.ndarray | None = None     # the (H, W, 4) uint8 overlay shown
         self._auto_fit = True
@@ -149,7 +163,65 @@ class ImageView(QGraphicsView):
         if self._auto_fit:
             self.fit()
 
+    # ---------------------------------------------------------------- region drawing
+    def set_draw_mode(self, mode: str | None) -> None:
+        """``"rect"`` (drag), ``"polygon"`` (click the corners, double-click to close) or None (pan)."""
+        self.draw_mode = mode
+        self._drawing = []
+        self.setDragMode(QGraphicsView.DragMode.NoDrag if mode else QGraphicsView.DragMode.ScrollHandDrag)
+        self.viewport().setCursor(Qt.CursorShape.CrossCursor if mode else Qt.CursorShape.OpenHandCursor)
+
+    def set_region_outline(self, points: list[tuple[float, float]] | None) -> None:
+        """Draw a region's outline (image pixel coordinates); None hides it."""
+        self._region.setVisible(bool(points))
+        self._region.setPolygon(QPolygonF([QPointF(x, y) for x, y in (points or [])]))
+
+    def _scene_pos(self, e) -> QPointF:
+        return self.mapToScene(e.position().toPoint())
+
+    def mousePressEvent(self, e) -> None:  # noqa: N802
+        if self.draw_mode and e.button() == Qt.MouseButton.LeftButton and self.array is not None:
+            p = self._scene_pos(e)
+            if self.draw_mode == "rect":
+                self._drawing = [p, p]
+            else:
+                if self._drawing:  # the corner that followed the mouse stays here
+                    self._drawing[-1] = p
+                self._drawing = (self._drawing or [p]) + [p]  # the last corner follows the mouse
+            self._show_drawing()
+            return
+        super().mousePressEvent(e)
+
+    def mouseReleaseEvent(self, e) -> None:  # noqa: N802
+        if self.draw_mode == "rect" and self._drawing and e.button() == Qt.MouseButton.LeftButton:
+            a, b = self._drawing[0], self._scene_pos(e)
+            self._drawing = []
+            if abs(b.x() - a.x()) >= 1 and abs(b.y() - a.y()) >= 1:  # a click is not a region
+                self.region_drawn.emit("rect", (a.x(), a.y(), b.x(), b.y()))
+            return
+        super().mouseReleaseEvent(e)
+
+    def _show_drawing(self) -> None:
+        d = self._drawing
+        if self.draw_mode == "rect" and len(d) == 2:
+            a, b = d
+            pts = [(a.x(), a.y()), (b.x(), a.y()), (b.x(), b.y()), (a.x(), b.y())]
+        else:
+            pts = [(p.x(), p.y()) for p in d]
+        self.set_region_outline(pts)
+
     def mouseDoubleClickEvent(self, e) -> None:  # noqa: N802
+        if self.draw_mode == "polygon" and e.button() == Qt.MouseButton.LeftButton:
+            corners = [(p.x(), p.y()) for p in self._drawing[:-1]]  # the last one follows the mouse
+            # a double click also sent a press: drop the duplicate corners it added
+            dedup = [c for i, c in enumerate(corners) if i == 0 or np.hypot(c[0] - corners[i - 1][0],
+                                                                             c[1] - corners[i - 1][1]) > 0.5]
+            self._drawing = []
+            if len(dedup) >= 3:
+                self.region_drawn.emit("polygon", dedup)
+            return
+        if self.draw_mode:
+            return
         self._auto_fit = True
         self.fit()
         self.zoomed.emit(self.transform())
@@ -173,6 +245,9 @@ class ImageView(QGraphicsView):
     def mouseMoveEvent(self, e) -> None:  # noqa: N802
         super().mouseMoveEvent(e)
         p = self.mapToScene(e.position().toPoint())
+        if self.draw_mode and self._drawing:
+            self._drawing[-1] = p
+            self._show_drawing()
         self.hover_scene(p)
 
     def hover_scene(self, p: QPointF) -> None:
@@ -426,14 +501,42 @@ class SideBySideView(ViewGrid):
         session.events.display.connect(self._display)
         session.events.cursor.connect(self._cursor)
         self.hovered.connect(lambda _name, r, c: session.hover("target", r, c))
+        session.events.region.connect(self._region)
+        self.draw_mode: str | None = None
 
     def _refresh(self) -> None:
         s = self.session
+        before = list(self.views)
         self.set_layers([L.name for L in s.layers], {L.name: s.layer_title(L) for L in s.layers})
         for L in s.layers:
             self.set_image(L.name, s.renders[L.name])
             self.views[L.name].bar.set_bar(*s.colour_bar(L))
+        if list(self.views) != before:  # new views: they draw regions too
+            for tv in self.views.values():
+                tv.view.region_drawn.connect(s.set_region)
+                tv.view.set_draw_mode(self.draw_mode)
         self.set_home(home_rect(s.home))
+        self._region()
+
+    def set_draw_mode(self, mode: str | None) -> None:
+        """Draw a region (``"rect"`` / ``"polygon"``) on any of the linked views, or pan (None)."""
+        self.draw_mode = mode
+        for tv in self.views.values():
+            tv.view.set_draw_mode(mode)
+
+    def _region(self) -> None:
+        """Outline the session's region on every view."""
+        reg = self.session.region
+        pts = None
+        if reg is not None:
+            kind, shape = reg
+            if kind == "rect":
+                x0, y0, x1, y1 = shape
+                pts = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+            else:
+                pts = [tuple(p) for p in shape]
+        for tv in self.views.values():
+            tv.view.set_region_outline(pts)
 
     def _display(self, name: str) -> None:
         L = self.session.layer(name)

@@ -16,6 +16,7 @@ Events (``session.events.<name>``; callbacks get the arguments listed):
 * ``cursor()``      the cursor moved or what is read at it changed (``readout``, ``spectrum``)
 * ``masks_source()`` the source camera whose cases the masks view and the read-out use
 * ``busy()``        a job started or ended (``session.busy``)
+* ``region()``      the region (``session.region``) or its statistics (``region_stats``) changed
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ class Event:
 
 
 class SessionEvents:
-    NAMES = ("source", "raw", "result", "display", "cursor", "masks_source", "busy")
+    NAMES = ("source", "raw", "result", "display", "cursor", "masks_source", "busy", "region")
 
     def __init__(self) -> None:
         for n in self.NAMES:
@@ -249,6 +250,8 @@ class RegistrationSession:
     spectrum: tuple[np.ndarray, np.ndarray | None, str] | None = None
     busy: dict[int, tuple[str, str]] = field(default_factory=dict)   # job id -> (kind, title)
     pending_target: str | None = None
+    region: tuple[str, Any] | None = None    # ("rect", (x0, y0, x1, y1)) or ("polygon", [(x, y), ...]), target px
+    region_stats: Any = None                  # core.region.RegionStats of the masks source over the region
     generation: int = 0
     events: SessionEvents = field(default_factory=SessionEvents, repr=False)
 
@@ -346,6 +349,7 @@ class RegistrationSession:
         self.layers, self.renders, self.meshes = [], {}, {}
         if had:
             self.events.result.emit()
+        self.set_region(None)
 
     def apply_registered(self, out: dict, generation: int | None = None) -> bool:
         """A :func:`register_job` result; ignored (False) when other data was opened meanwhile."""
@@ -361,6 +365,8 @@ class RegistrationSession:
             self.masks_source = out["worst"] if "worst" in out else worst_source(self.result.cases)
         self.events.result.emit()
         self.events.masks_source.emit()
+        if self.region is not None:  # a new result (other parameters): the same region's new statistics
+            self._region_changed()
         if centre is not None:  # start with the cursor on the object so every read-out has a value
             self.hover("target", *centre)
         return True
@@ -389,8 +395,57 @@ class RegistrationSession:
             return
         self.masks_source = name
         self.events.masks_source.emit()
+        if self.region is not None:  # the region's statistics are the masks source's
+            self._region_changed()
         if self.cursor is not None:  # the read-out names the case of this source: refresh it now
             self.hover(*self.cursor)
+
+    # ------------------------------------------------------------------ region tool
+    def set_region(self, kind: str | None, shape: Any = None) -> None:
+        """Select a region of the target image: ``("rect", (x0, y0, x1, y1))`` or ``("polygon",
+        [(x, y), ...])`` in target pixel coordinates (pixel (r, c) covers [c, c+1) x [r, r+1));
+        ``None`` clears it. Computes the masks source's statistics over it (core/region.py)."""
+        new = None if kind is None else (kind, shape)
+        if new is None and self.region is None:
+            return
+        self.region = new
+        self._region_changed()
+
+    def region_mask(self) -> np.ndarray | None:
+        """(H, W) bool of the region in the target grid (None without a region or a result)."""
+        from ...core.region import region_mask
+
+        if self.region is None or self.result is None:
+            return None
+        kind, shape = self.region
+        return region_mask(self.result.shape, **({"rect": shape} if kind == "rect" else {"polygon": shape}))
+
+    def stats_for(self, source: str, mask: np.ndarray) -> Any:
+        from ...core.region import region_stats
+
+        L = self.layer(source)
+        return region_stats(self.result, mask, source, None if L is None else L.wavelengths,
+                            "" if L is None else L.unit)
+
+    def _region_changed(self) -> None:
+        mask = self.region_mask()
+        src = self.masks_source if self.result is not None and self.masks_source in self.result.registered \
+            else (self.result.target if self.result is not None else None)
+        self.region_stats = None if mask is None or src is None else self.stats_for(src, mask)
+        self.events.region.emit()
+
+    def region_csv(self) -> str:
+        """Statistics of every camera (target first) over the region, as core.region.stats_csv's CSV."""
+        from ...core.region import stats_csv
+
+        mask = self.region_mask()
+        if mask is None:
+            raise InputError("draw a region on the registered images first")
+        kind, shape = self.region
+        desc = (f"rect x {shape[0]:.1f}-{shape[2]:.1f} y {shape[1]:.1f}-{shape[3]:.1f}" if kind == "rect"
+                else f"polygon {len(shape)} corners")
+        return stats_csv([self.stats_for(L.name, mask) for L in self.layers if L.name in self.result.registered],
+                         desc)
 
     # ------------------------------------------------------------------ cursor and read-out
     def band_for(self, L: Layer) -> int | None:

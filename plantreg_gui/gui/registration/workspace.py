@@ -30,6 +30,7 @@ from .export_dialog import ExportDialog, folder_is_nonempty
 from .image_views import SpectrumPlot
 from .model import DisplaySettings
 from .params_panel import ParamsPanel
+from .region_panel import RegionPanel
 from .session import RegistrationSession, demo_job, load_job, plant3d_job, register_job
 from .views import VIEWS, view_key
 
@@ -199,6 +200,12 @@ class RegistrationWorkspace(QWidget):
         sl.addWidget(self.controls)
         self.params_panel = ParamsPanel(self.session)
         sl.addWidget(self.params_panel)
+        self.region_panel = RegionPanel(self.session)
+        self.region_panel.tool_changed.connect(self._region_tool)
+        self.region_panel.csv_button.clicked.disconnect()
+        self.region_panel.csv_button.clicked.connect(lambda: self._guard(self.region_panel._ask_csv,
+                                                                         title="Cannot save the statistics"))
+        sl.addWidget(self.region_panel)
         self.spectrum_label = QLabel("Spectrum under the cursor")
         sl.addWidget(self.spectrum_label)
         sl.addWidget(self.spectrum)
@@ -666,6 +673,12 @@ class RegistrationWorkspace(QWidget):
     def _tab_changed(self, _i: int) -> None:
         if self.tabs.currentWidget() is self.cloud_view:
             self.cloud_view.render_now()
+
+    def _region_tool(self, mode: str | None) -> None:
+        """Regions are drawn on the registered images: draw mode on there, and show them."""
+        self.sbs_grid.set_draw_mode(mode)
+        if mode is not None:
+            self.set_view("side-by-side")
 
     def _display_changed(self, name: str, settings: DisplaySettings) -> None:
         self.session.set_display(name, settings)
