@@ -114,3 +114,37 @@ def test_region_polygon_by_clicks(registered_workspace, qtbot):
         assert abs(px - cx) <= 1.5 / scale + 1e-6 and abs(py - cy) <= 1.5 / scale + 1e-6
     assert s.region_stats.pixels == region_mask(s.result.shape, polygon=pts).sum() > 0
     ws.region_panel.set_tool(None)
+
+
+# ---------------------------------------------------------------------- save the view as PNG
+@pytest.mark.parametrize("key", ["side-by-side", "3d"])
+def test_save_view_as_png(registered_workspace, qtbot, tmp_path, key, monkeypatch):
+    import cv2
+    from PySide6.QtCore import Qt
+
+    from plantreg_gui.gui.registration import workspace as wsmod
+
+    ws = registered_workspace
+    ws.set_view(key)
+    qtbot.waitExposed(ws)
+    path = tmp_path / f"{key}"  # no suffix typed: .png is added
+    monkeypatch.setattr(wsmod.QFileDialog, "getSaveFileName", lambda *a, **k: (str(path), "PNG image (*.png)"))
+    ws.activateWindow()
+    ws.views[key].setFocus()
+    qtbot.keyClick(ws.views[key], Qt.Key.Key_S, Qt.KeyboardModifier.ControlModifier | Qt.KeyboardModifier.ShiftModifier)
+    if not path.with_suffix(".png").exists():  # no keyboard focus under some window managers: the menu action
+        ws.save_view_action.trigger()
+    path = path.with_suffix(".png")
+    assert path.exists()
+    img = cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
+    if key == "3d":
+        assert img.shape[:2] == tuple(ws.cloud_view.plotter.window_size[::-1])
+    else:
+        assert img.shape[:2] == (ws.views[key].height(), ws.views[key].width())
+    # the plant is there: the demo's leaves are green in the rgb camera, which colours the cloud,
+    # and the registered rgb image is one of the side-by-side views
+    r, g, b = (img[..., i].astype(int) for i in range(3))
+    green = (g > r + 25) & (g > b + 25)
+    assert green.mean() > 0.005, green.mean()
+    assert ws.save_view_action.shortcut().toString() == "Ctrl+Shift+S"
+    assert "Saved the" in ws.readout.text()

@@ -14,7 +14,9 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
 from PySide6.QtCore import QEvent, QSettings, Qt, Signal
+from PySide6.QtGui import QKeySequence
 from PySide6.QtWidgets import (
     QComboBox, QFileDialog, QInputDialog, QLabel, QMenu, QMessageBox, QProgressBar, QPushButton, QSplitter,
     QStatusBar, QTabWidget, QToolBar, QToolButton, QVBoxLayout, QWidget,
@@ -144,6 +146,11 @@ class RegistrationWorkspace(QWidget):
         self.file_menu.addAction("Load demo", lambda: self._guard(self.load_demo))
         self.export_action = self.file_menu.addAction("Export…", self._ask_export)
         self.export_action.setEnabled(False)
+        self.save_view_action = self.file_menu.addAction("Save view as PNG…",
+                                                         lambda: self._guard(self._ask_save_view, title="Cannot save"))
+        self.save_view_action.setShortcut(QKeySequence("Ctrl+Shift+S"))
+        self.save_view_action.setShortcutContext(Qt.ShortcutContext.WidgetWithChildrenShortcut)
+        self.addAction(self.save_view_action)  # the shortcut works without opening the menu
         fb = QToolButton()
         fb.setText("File")
         fb.setMenu(self.file_menu)
@@ -673,6 +680,39 @@ class RegistrationWorkspace(QWidget):
     def _tab_changed(self, _i: int) -> None:
         if self.tabs.currentWidget() is self.cloud_view:
             self.cloud_view.render_now()
+
+    # ------------------------------------------------------------------ save the view
+    def _ask_save_view(self) -> None:
+        key = self.current_view()
+        start = (self.session.recording_path.parent if self.session.recording_path and not self.session.is_demo
+                 else Path.home()) / f"plantreg-{key}.png"
+        p, _ = QFileDialog.getSaveFileName(self, "Save view as PNG", str(start), "PNG image (*.png)")
+        if p:
+            self.save_view_png(p if p.lower().endswith(".png") else p + ".png")
+
+    def save_view_png(self, path: str | Path) -> Path:
+        """Save the shown view as a PNG: a 2D view as drawn on screen (images, titles, colour bars),
+        the 3D view as its rendered scene at the window's size. Returns the path."""
+        from ...core.imageio import write_png
+
+        path = Path(path)
+        key = self.current_view()
+        w = self.views[key]
+        if key == "3d":
+            self.cloud_view.render_now()
+            if self.cloud_view.plotter is None:
+                raise InputError("the 3D view has nothing to show yet; register first", path)
+            rgb = np.ascontiguousarray(np.asarray(self.cloud_view.plotter.screenshot(None, return_img=True))[..., :3])
+        else:
+            from .image_views import rgb8_from_qimage
+
+            rgb = rgb8_from_qimage(w.grab().toImage())
+        try:
+            write_png(path, rgb)  # the core's writer: atomic, nothing half-written
+        except OSError as e:
+            raise InputError(f"cannot write the PNG ({e.strerror or e})", path) from None
+        self.readout.setText(f"Saved the {key} view to {path}")
+        return path
 
     def _region_tool(self, mode: str | None) -> None:
         """Regions are drawn on the registered images: draw mode on there, and show them."""
