@@ -148,3 +148,76 @@ def test_save_view_as_png(registered_workspace, qtbot, tmp_path, key, monkeypatc
     assert green.mean() > 0.005, green.mean()
     assert ws.save_view_action.shortcut().toString() == "Ctrl+Shift+S"
     assert "Saved the" in ws.readout.text()
+
+
+# ---------------------------------------------------------------------- display limits and bands
+def _choose_layer(ws, name):
+    ws.controls.layer.setCurrentText(name)
+    assert ws.controls.layer.currentText() == name
+
+
+def test_absolute_limits_are_drawn_and_locked_across_recordings(registered_workspace, qtbot, demo_dir):
+    from plantreg_gui.core import display
+    from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
+
+    ws = registered_workspace
+    s = ws.session
+    c = ws.controls
+    th = np.asarray(s.layer("thermal").data)
+    lo, hi = (round(float(v), 1) for v in np.nanpercentile(th, [30, 70]))  # a band of the leaf temperatures
+    _choose_layer(ws, "thermal")
+    c.limit_mode.setCurrentIndex(c.limit_mode.findData("absolute"))
+    assert c.lo.suffix() == " °C"
+    c.lo.setValue(lo)
+    c.hi.setValue(hi)
+    qtbot.waitUntil(lambda: s.settings_for("thermal").limits == (lo, hi), timeout=3000)
+    want = display.to_rgb8(th, modality="thermal", limits=(lo, hi))
+    assert np.array_equal(s.renders["thermal"], want)
+    bar = ws.sbs_grid.views["thermal"].bar
+    assert bar.limits == (lo, hi) and bar.lo.text() == f"{lo:.1f}"
+    assert s.export_display_options()["thermal"]["limits"] == (lo, hi)  # the export looks the same
+    # not locked: another recording goes back to the percentiles
+    ws._job_settings()
+    assert s.settings_for("thermal").limits is None
+    # locked: kept for the next recording, and remembered for the next session
+    s.set_display("thermal", s.settings_for("thermal").with_(limits=(lo, hi)))
+    _choose_layer(ws, "ir")
+    _choose_layer(ws, "thermal")
+    assert c.limit_mode.currentData() == "absolute" and c.lo.value() == lo
+    c.lock.setChecked(True)
+    qtbot.waitUntil(lambda: s.settings_for("thermal").locked, timeout=3000)
+    ws.open_recording(demo_dir / "recording")
+    qtbot.waitUntil(lambda: not ws.is_busy(), timeout=60000)
+    assert s.settings_for("thermal").limits == (lo, hi)
+    raw = s.layer("thermal", registered=False)
+    assert np.array_equal(s.raw_renders["thermal"], display.to_rgb8(raw.data, modality="thermal", limits=(lo, hi)))
+    other = RegistrationWorkspace()
+    try:
+        assert other.remembered_display()["thermal"].limits == (lo, hi)
+        assert other.remembered_display()["thermal"].locked
+    finally:
+        other.shutdown()
+        other.deleteLater()
+
+
+def test_band_pickers_in_nm(registered_workspace, qtbot):
+    ws = registered_workspace
+    s = ws.session
+    cube = next(L for L in s.layers if L.bands > 3)
+    wl = cube.wavelengths
+    assert wl is not None  # the demo rig gives the cube's band centres ("bands", nm)
+    _choose_layer(ws, cube.name)
+    c = ws.controls
+    c.mode.setCurrentIndex(c.mode.findData("bands"))
+    sb = c.bands[0]
+    assert sb.text() == f"{wl[sb.value()]:.0f} nm"
+    target = float(wl[len(wl) // 3]) + 0.4  # typing a wavelength picks the nearest band
+    sb.lineEdit().selectAll()
+    qtbot.keyClicks(sb.lineEdit(), f"{target:.1f}")
+    sb.interpretText()
+    assert sb.value() == int(np.argmin(np.abs(wl - target)))
+    qtbot.waitUntil(lambda: s.settings_for(cube.name).bands is not None
+                    and s.settings_for(cube.name).bands[0] == sb.value(), timeout=3000)
+    # without wavelengths: the index
+    sb.set_wavelengths(None)
+    assert sb.text() == str(sb.value())

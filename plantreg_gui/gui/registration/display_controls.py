@@ -1,15 +1,57 @@
-"""Per-modality display controls: colour map, contrast limits by percentile, and for cubes PCA
-false colour or three chosen bands. Emits the new settings; the workspace re-renders."""
+"""Per-modality display controls: colour map, contrast limits by percentile or absolute (in the
+image's unit, optionally locked across recordings), and for cubes PCA false colour or three
+chosen bands (picked in nm when the rig gives the band centres). Emits the new settings; the
+workspace re-renders."""
 
 from __future__ import annotations
 
 from PySide6.QtCore import QTimer, Signal
 from PySide6.QtWidgets import (
-    QComboBox, QDoubleSpinBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QSpinBox, QVBoxLayout, QWidget,
+    QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QSpinBox, QVBoxLayout,
+    QWidget,
 )
 
-from ...core import modality
+import numpy as np
+
+from ...core import display, modality
 from .model import COLORMAPS, DisplaySettings, Layer
+
+
+class BandSpinBox(QSpinBox):
+    """A band index shown as its centre wavelength ("552 nm") when the cube's ``wavelengths`` are
+    known (the rig's ``bands`` metadata), else as the index; typing a wavelength picks the nearest band."""
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.wavelengths: np.ndarray | None = None
+
+    def set_wavelengths(self, wl: np.ndarray | None) -> None:
+        self.wavelengths = None if wl is None else np.asarray(wl, np.float64).ravel()
+        self.setToolTip("band centre (nm)" if self.wavelengths is not None else "band index (the rig gives no "
+                        "wavelengths: add the camera's \"bands\" in nm to show them here)")
+        self.lineEdit().setText(self.textFromValue(self.value()))
+
+    def textFromValue(self, v: int) -> str:  # noqa: N802 (Qt name)
+        wl = self.wavelengths
+        if wl is not None and 0 <= v < wl.size:
+            return f"{wl[v]:.0f} nm"
+        return str(v)
+
+    def valueFromText(self, text: str) -> int:  # noqa: N802
+        t = text.replace("nm", "").strip()
+        try:
+            x = float(t)
+        except ValueError:
+            return self.value()
+        wl = self.wavelengths
+        if wl is not None:
+            return int(np.argmin(np.abs(wl - x)))
+        return int(round(x))
+
+    def validate(self, text: str, pos: int):  # noqa: D401 - any text; valueFromText decides
+        from PySide6.QtGui import QValidator
+
+        return QValidator.State.Intermediate if not text.strip() else QValidator.State.Acceptable, text, pos
 
 
 class DisplayControls(QGroupBox):
@@ -29,15 +71,20 @@ class DisplayControls(QGroupBox):
         self.lo = QDoubleSpinBox()
         self.hi = QDoubleSpinBox()
         for sb, v in ((self.lo, 1.0), (self.hi, 99.0)):
-            sb.setRange(0.0, 100.0)
-            sb.setDecimals(1)
-            sb.setSingleStep(0.5)
-            sb.setSuffix(" %")
+            sb.setKeyboardTracking(False)
             sb.setValue(v)
+        self.limit_mode = QComboBox()
+        self.limit_mode.addItem("percentiles", "percentiles")
+        self.limit_mode.addItem("absolute", "absolute")
+        self.limit_mode.setToolTip("percentiles of each image's values, or absolute values in the image's unit")
+        self.lock = QCheckBox("Lock limits across recordings")
+        self.lock.setToolTip("keep these absolute limits when another recording is opened (and next time), so "
+                             "colours mean the same values in every recording")
+        self._set_limit_kind("percentiles")
         self.mode = QComboBox()
         self.mode.addItem("PCA false colour", "pca")
         self.mode.addItem("three bands (R, G, B)", "bands")
-        self.bands = [QSpinBox() for _ in range(3)]
+        self.bands = [BandSpinBox() for _ in range(3)]
         bl = QHBoxLayout()
         for sb in self.bands:
             sb.setRange(0, 0)
@@ -56,7 +103,9 @@ class DisplayControls(QGroupBox):
         lim.addWidget(self.lo)
         lim.addWidget(QLabel("–"))
         lim.addWidget(self.hi)
-        form.addRow("Limits (percentiles)", lim)
+        form.addRow("Limits", self.limit_mode)
+        form.addRow("", lim)
+        form.addRow("", self.lock)
         self.limits_note = QLabel("Lower limit must be below the upper; not applied.")
         self.limits_note.setStyleSheet("color: #a00000; font-size: 11px;")
         self.limits_note.hide()
@@ -74,6 +123,8 @@ class DisplayControls(QGroupBox):
         self.layer.currentIndexChanged.connect(self._show_layer)
         for w in (self.cmap, self.mode):
             w.currentIndexChanged.connect(self._edited)
+        self.limit_mode.currentIndexChanged.connect(self._limit_kind_changed)
+        self.lock.toggled.connect(self._edited)
         for sb in (self.lo, self.hi, *self.bands):
             sb.valueChanged.connect(self._edited)
         self._loading = False
@@ -108,12 +159,18 @@ class DisplayControls(QGroupBox):
         self.cmap.setEnabled(single)
         i = self.cmap.findData(s.cmap) if s.cmap else 0
         self.cmap.setCurrentIndex(max(i, 0))
-        self.lo.setValue(s.percentiles[0])
-        self.hi.setValue(s.percentiles[1])
+        self.limit_mode.setCurrentIndex(1 if s.limits is not None else 0)
+        self._set_limit_kind("absolute" if s.limits is not None else "percentiles", L.unit)
+        lo, hi = s.limits if s.limits is not None else s.percentiles
+        self.lo.setValue(lo)
+        self.hi.setValue(hi)
+        self.lock.setChecked(s.locked)
+        self.lock.setEnabled(s.limits is not None)
         self.mode.setEnabled(is_cube)
         self.mode.setCurrentIndex(1 if s.bands is not None else 0)
         for k, sb in enumerate(self.bands):
             sb.setRange(0, max(L.bands - 1, 0))
+            sb.set_wavelengths(L.wavelengths if is_cube else None)
             default = (0, L.bands // 2, L.bands - 1)[k] if is_cube else 0
             sb.setValue(s.bands[k] if s.bands is not None else default)
         self.band_row.setEnabled(is_cube and s.bands is not None)
@@ -139,9 +196,55 @@ class DisplayControls(QGroupBox):
             return
         bands = tuple(sb.value() for sb in self.bands) if self.mode.currentData() == "bands" else None
         self.band_row.setEnabled(bands is not None)
+        absolute = self.limit_mode.currentData() == "absolute"
+        self.lock.setEnabled(absolute)
+        old = self.settings_for(name)
+        pct = old.percentiles if absolute else (lo, hi)
+        st = DisplaySettings(self.cmap.currentData(), pct, bands, (lo, hi) if absolute else None,
+                             absolute and self.lock.isChecked())
         # the owner (the workspace's session) stores it when the throttled signal arrives
-        self._pending = (name, DisplaySettings(self.cmap.currentData(), (lo, hi), bands))
+        self._pending = (name, st)
         self._timer.start()
+
+    # ------------------------------------------------------------------ limits: percentiles or absolute
+    def _set_limit_kind(self, kind: str, unit: str = "") -> None:
+        for sb in (self.lo, self.hi):
+            sb.blockSignals(True)
+            if kind == "absolute":
+                sb.setRange(-1e9, 1e9)
+                sb.setDecimals(2)
+                sb.setSingleStep(0.5)
+                sb.setSuffix(f" {unit}" if unit else "")
+            else:
+                sb.setRange(0.0, 100.0)
+                sb.setDecimals(1)
+                sb.setSingleStep(0.5)
+                sb.setSuffix(" %")
+            sb.blockSignals(False)
+
+    def _limit_kind_changed(self) -> None:
+        """Switching to absolute starts from the limits the percentiles gave (what is on screen)."""
+        if self._loading:
+            return
+        L = self.layers.get(self.layer.currentText())
+        if L is None:
+            return
+        kind = self.limit_mode.currentData()
+        s = self.settings_for(L.name)
+        self._loading = True
+        self._set_limit_kind(kind, L.unit)
+        if kind == "absolute":
+            try:
+                lo, hi = display.auto_limits(np.asarray(L.data), s.percentiles)
+            except (ValueError, TypeError):
+                lo, hi = 0.0, 1.0
+            lo, hi = float(lo), float(hi)
+        else:
+            lo, hi = s.percentiles
+        self.lo.setValue(lo)
+        self.hi.setValue(hi)
+        self._loading = False
+        self._edited()
 
     def _emit(self) -> None:
         pending, self._pending = getattr(self, "_pending", None), None

@@ -26,11 +26,16 @@ COLORMAPS = ["gray", "viridis", "magma", "inferno", "RdBu_r", "coolwarm", "bwr",
 @dataclass
 class DisplaySettings:
     """How one modality is drawn. ``cmap`` None = the modality's default (thermal RdBu_r,
-    infrared gray, depth viridis); ``bands`` None = PCA false colour for cubes."""
+    infrared gray, depth viridis); ``bands`` None = PCA false colour for cubes. ``limits``
+    absolute (lo, hi) in the layer's unit (e.g. 18-26 °C), used instead of the ``percentiles``
+    when set; ``locked`` keeps them when another recording is opened (so colours compare
+    between recordings), otherwise a new recording goes back to the percentiles."""
 
     cmap: str | None = None
     percentiles: tuple[float, float] = (1.0, 99.0)
     bands: tuple[int, int, int] | None = None
+    limits: tuple[float, float] | None = None
+    locked: bool = False
 
     def with_(self, **kw: Any) -> "DisplaySettings":
         return replace(self, **kw)
@@ -44,7 +49,9 @@ def render(img: np.ndarray, modality: str, settings: DisplaySettings | None = No
     bands = s.bands
     if bands is not None and (img.ndim != 3 or img.shape[2] <= 3 and not _mod.is_cube(modality)):
         bands = None
-    return display.to_rgb8(img, modality=modality, cmap=s.cmap, percentiles=s.percentiles, bands=bands, pca=pca)
+    limits = s.limits if s.limits is not None and pca is None else None  # PCA colours have no unit
+    return display.to_rgb8(img, modality=modality, cmap=s.cmap, limits=limits, percentiles=s.percentiles,
+                           bands=bands, pca=pca)
 
 
 def pca_basis(raw: np.ndarray, modality: str, settings: DisplaySettings | None = None) -> display.PcaBasis | None:

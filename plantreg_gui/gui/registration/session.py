@@ -390,6 +390,13 @@ class RegistrationSession:
                     self.cloud.colours[name] = self.renders[name].reshape(-1, 3)[self.cloud.pixels]
         self.events.display.emit(name)
 
+    def release_unlocked_limits(self) -> None:
+        """Before another recording is opened: absolute limits that are not locked belong to the
+        recording they were set on; the next one is drawn by its percentiles again."""
+        for name, st in list(self.display.items()):
+            if st.limits is not None and not st.locked:
+                self.display[name] = st.with_(limits=None)
+
     def set_masks_source(self, name: str) -> None:
         if name == self.masks_source:
             return
@@ -551,7 +558,8 @@ class RegistrationSession:
         from ...core import display
 
         st = self.settings_for(L.name)
-        return st.cmap or modality.default_cmap(L.modality), display.auto_limits(L.data, st.percentiles), L.unit
+        lim = st.limits if st.limits is not None else display.auto_limits(L.data, st.percentiles)
+        return st.cmap or modality.default_cmap(L.modality), lim, L.unit
 
     def layer_title(self, L: Layer, raw: bool = False) -> str:
         h, w = L.data.shape[:2]
@@ -570,6 +578,8 @@ class RegistrationSession:
             o: dict[str, Any] = {"percentiles": tuple(s.percentiles)}
             if s.cmap:
                 o["cmap"] = s.cmap
+            if s.limits is not None:
+                o["limits"] = tuple(s.limits)
             if s.bands is not None and L.bands > 3:
                 o["bands"] = tuple(s.bands)
             elif L.name in self.pca:

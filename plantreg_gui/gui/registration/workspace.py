@@ -568,10 +568,13 @@ class RegistrationWorkspace(QWidget):
     # ------------------------------------------------------------------ display settings remembered
     def _remember_display(self, name: str) -> None:
         """Colour map and limits per camera name survive the session (QSettings), so the next
-        recording of the same rig is drawn the same way; band choices depend on the cube and are not kept."""
+        recording of the same rig is drawn the same way; absolute limits only when locked; band
+        choices depend on the cube and are not kept."""
         st = self.session.settings_for(name)
-        self._settings().setValue(f"{DISPLAY_KEY}/{name}", json.dumps({"cmap": st.cmap,
-                                                                         "percentiles": list(st.percentiles)}))
+        d = {"cmap": st.cmap, "percentiles": list(st.percentiles)}
+        if st.locked and st.limits is not None:  # locked absolute limits hold for every recording
+            d.update(limits=list(st.limits), locked=True)
+        self._settings().setValue(f"{DISPLAY_KEY}/{name}", json.dumps(d))
 
     def remembered_display(self) -> dict[str, DisplaySettings]:
         qs = self._settings()
@@ -582,7 +585,12 @@ class RegistrationWorkspace(QWidget):
                 d = json.loads(str(qs.value(name)))
                 lo, hi = (float(x) for x in d["percentiles"])
                 if 0.0 <= lo < hi <= 100.0:
-                    out[name] = DisplaySettings(d.get("cmap") or None, (lo, hi))
+                    st = DisplaySettings(d.get("cmap") or None, (lo, hi))
+                    if d.get("locked") and d.get("limits"):
+                        a, b = (float(x) for x in d["limits"])
+                        if a < b:
+                            st = st.with_(limits=(a, b), locked=True)
+                    out[name] = st
             except (ValueError, KeyError, TypeError):
                 continue  # a damaged entry is ignored, not fatal
         qs.endGroup()
@@ -590,6 +598,7 @@ class RegistrationWorkspace(QWidget):
 
     def _job_settings(self) -> dict[str, DisplaySettings]:
         """Display settings for a job that renders: this session's, else the remembered ones."""
+        self.session.release_unlocked_limits()  # every job that renders reads a new recording
         for name, st in self.remembered_display().items():
             self.session.display.setdefault(name, st)
         return dict(self.session.display)
