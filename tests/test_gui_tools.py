@@ -43,7 +43,7 @@ def _drag(qtbot, view, a, b):
     return pa, pb
 
 
-def test_region_rectangle_gives_the_sources_statistics_and_csv(registered_workspace, qtbot, tmp_path):
+def test_region_rectangle_gives_the_sources_statistics_and_csv(registered_workspace, qtbot, tmp_path, monkeypatch):
     import csv
 
     from plantreg_gui.core.cases import Case
@@ -58,7 +58,7 @@ def test_region_rectangle_gives_the_sources_statistics_and_csv(registered_worksp
     view = ws.sbs_grid.views[r.target].view
     x0, y0, x1, y1 = s.home  # the object's box: the region holds leaves and background
     pa, pb = _drag(qtbot, view, (x0, y0), (x1, y1))
-    qtbot.waitUntil(lambda: s.region_stats is not None, timeout=2000)
+    qtbot.waitUntil(lambda: s.region_stats is not None, timeout=5000)
     # the rectangle is where the mouse went (to a view pixel): check against the truth computed here
     a, b = view.mapToScene(pa), view.mapToScene(pb)
     mask = np.zeros(r.shape, bool)
@@ -76,10 +76,18 @@ def test_region_rectangle_gives_the_sources_statistics_and_csv(registered_worksp
     assert "°C" in ws.region_panel.text.text() and f"{vals.mean():.2f}" in ws.region_panel.text.text()
     # every view outlines the region
     assert all(tv.view._region.isVisible() for tv in ws.sbs_grid.views.values())
-    # another source: the statistics follow
+    # another source: the statistics follow (computed on a worker)
     ws.region_panel.source.setCurrentText("rgb")
-    assert s.region_stats.source == "rgb" and s.region_stats.bands == 3
-    out = ws.region_panel.save_csv(tmp_path / "region.csv")
+    qtbot.waitUntil(lambda: s.region_stats is not None and s.region_stats.source == "rgb", timeout=5000)
+    assert s.region_stats.bands == 3
+    # CSV… asks for a file name (answered here) and computes every camera's statistics on a worker
+    from plantreg_gui.gui.registration import workspace as wsmod
+
+    out = tmp_path / "region"
+    monkeypatch.setattr(wsmod.QFileDialog, "getSaveFileName", lambda *a, **k: (str(out), "CSV (*.csv)"))
+    ws.region_panel.csv_button.click()
+    out = out.with_suffix(".csv")
+    qtbot.waitUntil(lambda: out.exists() and not ws.is_busy(), timeout=10000)
     rows = list(csv.DictReader(out.open()))
     therm = [row for row in rows if row["source"] == "thermal" and row["statistic"] == "mean"]
     assert len(therm) == 1 and float(therm[0]["value"]) == pytest.approx(vals.mean(), abs=1e-3)
@@ -106,7 +114,7 @@ def test_region_polygon_by_clicks(registered_workspace, qtbot):
         p = view.mapFromScene(QPointF(*c))
         qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=p)
     qtbot.mouseDClick(view.viewport(), Qt.MouseButton.LeftButton, pos=view.mapFromScene(QPointF(*corners[-1])))
-    qtbot.waitUntil(lambda: s.region is not None, timeout=2000)
+    qtbot.waitUntil(lambda: s.region_stats is not None, timeout=5000)
     kind, pts = s.region
     assert kind == "polygon" and len(pts) == 3
     for (px, py), (cx, cy) in zip(pts, corners):  # where the clicks were, to a screen pixel

@@ -82,23 +82,21 @@ class RegionStats:
         return int(self.mean.size)
 
 
-def _values_in(reg: Any, mask: np.ndarray) -> np.ndarray:
-    """(n, B) float64 values of a registered image (array or HitImage) at the ``mask`` pixels
-    (row-major order); only the mask's bounding box is expanded."""
-    rows = np.flatnonzero(mask.any(axis=1))
-    cols = np.flatnonzero(mask.any(axis=0))
+def _values_at(reg: Any, flat: np.ndarray) -> np.ndarray:
+    """(n, B) float32 values of a registered image (array or HitImage) at the row-major pixel
+    indices ``flat`` (n,), NaN where not mapped; only those pixels are read (a large cube is never
+    expanded)."""
     shape = reg.shape if hasattr(reg, "shape") else np.shape(reg)
     B = int(shape[2]) if len(shape) == 3 else 1
-    if rows.size == 0:
-        return np.empty((0, B))
-    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
-    if hasattr(reg, "block") and not isinstance(reg, np.ndarray):  # HitImage: None = no hits in the box
-        box = reg.block(r0, r1, c0, c1)
-        if box is None:
-            return np.full((int(mask.sum()), B), np.nan)
-    else:
-        box = np.asarray(reg[r0:r1, c0:c1])
-    return np.asarray(box, dtype=np.float64).reshape(r1 - r0, c1 - c0, B)[mask[r0:r1, c0:c1]]
+    index = getattr(reg, "index", None)
+    if index is not None and not isinstance(reg, np.ndarray):  # HitImage: values at its hits only
+        out = np.full((len(flat), B), np.nan, np.float32)
+        if len(index):
+            pos = np.minimum(np.searchsorted(index, flat), len(index) - 1)
+            ok = index[pos] == flat
+            out[ok] = reg.values[pos[ok]]
+        return out
+    return np.asarray(reg).reshape(int(shape[0]) * int(shape[1]), B)[flat].astype(np.float32, copy=False)
 
 
 def region_stats(result: Any, mask: np.ndarray, source: str, wavelengths: np.ndarray | None = None,
@@ -119,22 +117,25 @@ def region_stats(result: Any, mask: np.ndarray, source: str, wavelengths: np.nda
         codes = np.where(obj, int(Case.P1), int(Case.BACKGROUND)).astype(np.uint8)
     cm = np.asarray(codes, np.uint8)[mask]
     counts = np.bincount(cm, minlength=256)
-    cases = {c.short: (int(counts[c]), 100.0 * counts[c] / n if n else 0.0) for c in Case}
+    order = sorted(Case, key=lambda c: (c == Case.BACKGROUND, int(c)))  # the object's cases first, P6 last
+    cases = {c.short: (int(counts[c]), 100.0 * counts[c] / n if n else 0.0) for c in order}
     mixed_map = (getattr(result, "mixed", None) or {}).get(source)
     mixed = np.asarray(mixed_map, bool)[mask] if mixed_map is not None else np.zeros(n, bool)
-    vals = _values_in(result.registered[source], mask)
-    use = (cm == Case.P1) & ~mixed & np.isfinite(vals).all(axis=1)
-    v = vals[use]
+    p1 = cm == Case.P1
+    cand = np.flatnonzero(mask.ravel())[p1 & ~mixed]  # only these pixels' values are read
+    vals = _values_at(result.registered[source], cand)
     B = vals.shape[1]
-    if len(v):
-        mean, median, std = v.mean(axis=0), np.median(v, axis=0), v.std(axis=0)
+    # (B, n) contiguous float32: per-band reductions along memory order are ~8x faster for cubes
+    v = np.ascontiguousarray(vals[np.isfinite(vals).all(axis=1)].T)
+    if v.shape[1]:
+        mean, std = v.mean(axis=1, dtype=np.float64), v.std(axis=1, dtype=np.float64)
+        median = np.median(v, axis=1).astype(np.float64)
     else:
         mean = median = std = np.full(B, np.nan)
     wl = None if wavelengths is None else np.asarray(wavelengths, np.float64).ravel()
     if wl is not None and wl.size != B:
         wl = None
-    return RegionStats(source, n, cases, int(((cm == Case.P1) & mixed).sum()), int(use.sum()),
-                       mean, median, std, wl, unit)
+    return RegionStats(source, n, cases, int((p1 & mixed).sum()), int(v.shape[1]), mean, median, std, wl, unit)
 
 
 def stats_csv(stats: Sequence[RegionStats], region: str = "") -> str:

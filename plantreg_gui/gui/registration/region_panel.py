@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
-    QButtonGroup, QComboBox, QFileDialog, QGroupBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget,
+    QButtonGroup, QComboBox, QGroupBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget,
 )
 
 from ...core.errors import InputError
@@ -64,7 +64,7 @@ class RegionPanel(QGroupBox):
         self.rect_button.toggled.connect(lambda on: self._tool("rect", on))
         self.poly_button.toggled.connect(lambda on: self._tool("polygon", on))
         self.clear_button.clicked.connect(lambda: session.set_region(None))
-        self.csv_button.clicked.connect(self._ask_csv)
+        # csv_button: the owner (the workspace) asks for the file and computes on a worker
         self.source.currentTextChanged.connect(self._source_chosen)
         session.events.result.connect(self._result)
         session.events.masks_source.connect(self._masks_source)
@@ -117,8 +117,9 @@ class RegionPanel(QGroupBox):
         self.csv_button.setEnabled(st is not None)
         self.clear_button.setEnabled(s.region is not None)
         if st is None:
-            self.text.setText("Choose Rectangle or Polygon and draw on a registered image: the chosen source's "
-                              "cases and values over the region appear here." if s.result is not None else "")
+            self.text.setText("" if s.result is None else "Computing the statistics…" if s.region is not None else
+                              "Choose Rectangle or Polygon and draw on a registered image: the chosen source's "
+                              "cases and values over the region appear here.")
             self.spectrum.hide()
             return
         cases = "  ".join(f"{k} {n:,} ({p:.1f}%)" for k, (n, p) in st.cases.items() if n)
@@ -140,14 +141,9 @@ class RegionPanel(QGroupBox):
         self.text.setText("<br>".join(lines))
 
     # ------------------------------------------------------------------ CSV
-    def _ask_csv(self) -> None:
-        p, _ = QFileDialog.getSaveFileName(self, "Save region statistics", str(Path.home() / "region.csv"),
-                                           "CSV (*.csv)")
-        if p:
-            self.save_csv(p)
-
     def save_csv(self, path: str | Path) -> Path:
-        """Write every camera's statistics over the region (core.region.stats_csv) to ``path``."""
+        """Write every camera's statistics over the region (core.region.stats_csv) to ``path``, at
+        once (scripts and tests; the workspace's CSV… button computes them on a worker)."""
         from ...core.imageio import atomic_write_text
 
         if self.session.region is None:

@@ -174,6 +174,41 @@ def plant3d_job(folder: Path, plant: str, settings, progress) -> dict:
     return {"plant": p, "layers": layers, "renders": renders, "cloud": cloud}
 
 
+def mask_of(shape: tuple[int, int], region: tuple[str, Any]) -> np.ndarray:
+    """(H, W) bool of a session region (("rect", (x0, y0, x1, y1)) or ("polygon", [(x, y), ...]))."""
+    from ...core.region import region_mask
+
+    kind, geom = region
+    return region_mask(shape, **({"rect": geom} if kind == "rect" else {"polygon": geom}))
+
+
+def region_job(result: Any, region: tuple[str, Any], sources: list[str],
+               info: dict[str, tuple[Any, str]], progress=None) -> list:
+    """core.region statistics of ``sources`` over ``region`` of ``result``; ``info[source]`` =
+    (wavelengths or None, unit). Returns the RegionStats in ``sources`` order."""
+    from ...core.region import region_stats
+
+    mask = mask_of(result.shape, region)
+    out = []
+    for i, src in enumerate(sources):
+        if progress is not None:
+            progress(i / max(len(sources), 1), f"statistics of {src}")
+        wl, unit = info.get(src, (None, ""))
+        out.append(region_stats(result, mask, src, wl, unit))
+    return out
+
+
+def region_csv(result: Any, region: tuple[str, Any], sources: list[str], info: dict[str, tuple[Any, str]],
+               progress=None) -> str:
+    from ...core.region import stats_csv
+
+    kind, geom = region
+    desc = (f"rect x {min(geom[0], geom[2]):.1f}-{max(geom[0], geom[2]):.1f} "
+            f"y {min(geom[1], geom[3]):.1f}-{max(geom[1], geom[3]):.1f}" if kind == "rect"
+            else f"polygon {len(geom)} corners")
+    return stats_csv(region_job(result, region, sources, info, progress), desc)
+
+
 def summary_html(r: Any) -> str:
     """The side panel's summary of a result: size, slowest stages, case counts per source."""
     h, w = r.shape
@@ -252,6 +287,8 @@ class RegistrationSession:
     pending_target: str | None = None
     region: tuple[str, Any] | None = None    # ("rect", (x0, y0, x1, y1)) or ("polygon", [(x, y), ...]), target px
     region_stats: Any = None                  # core.region.RegionStats of the masks source over the region
+    region_token: int = 0                     # which region/source the statistics being computed belong to
+    stats_runner: Callable[[tuple, int], None] | None = field(default=None, repr=False)  # see _region_changed
     generation: int = 0
     events: SessionEvents = field(default_factory=SessionEvents, repr=False)
 
@@ -420,39 +457,48 @@ class RegistrationSession:
 
     def region_mask(self) -> np.ndarray | None:
         """(H, W) bool of the region in the target grid (None without a region or a result)."""
-        from ...core.region import region_mask
-
         if self.region is None or self.result is None:
             return None
-        kind, shape = self.region
-        return region_mask(self.result.shape, **({"rect": shape} if kind == "rect" else {"polygon": shape}))
+        return mask_of(self.result.shape, self.region)
 
-    def stats_for(self, source: str, mask: np.ndarray) -> Any:
-        from ...core.region import region_stats
-
-        L = self.layer(source)
-        return region_stats(self.result, mask, source, None if L is None else L.wavelengths,
-                            "" if L is None else L.unit)
+    def _camera_info(self, name: str) -> tuple[Any, str]:
+        L = self.layer(name)
+        return (None, "") if L is None else (L.wavelengths, L.unit)
 
     def _region_changed(self) -> None:
-        mask = self.region_mask()
-        src = self.masks_source if self.result is not None and self.masks_source in self.result.registered \
-            else (self.result.target if self.result is not None else None)
-        self.region_stats = None if mask is None or src is None else self.stats_for(src, mask)
+        """Start the statistics of the masks source over the region: through ``stats_runner`` (the
+        workspace runs it on a worker: a 4K cube takes seconds) or at once (tests, scripts)."""
+        self.region_token += 1
+        self.region_stats = None
+        r = self.result
+        src = None if r is None else (self.masks_source if self.masks_source in r.registered else r.target)
+        if self.region is not None and src is not None:
+            job = (region_job, r, self.region, [src], {src: self._camera_info(src)})
+            if self.stats_runner is not None:
+                self.stats_runner(job, self.region_token)
+            else:
+                self.apply_region_stats(job[0](*job[1:])[0], self.region_token)
+                return
         self.events.region.emit()
 
-    def region_csv(self) -> str:
-        """Statistics of every camera (target first) over the region, as core.region.stats_csv's CSV."""
-        from ...core.region import stats_csv
+    def apply_region_stats(self, stats: Any, token: int) -> None:
+        """A :func:`region_job` result (its first entry); ignored when the region or source changed since."""
+        if token == self.region_token:
+            self.region_stats = stats
+            self.events.region.emit()
 
-        mask = self.region_mask()
-        if mask is None:
+    def region_csv_job(self) -> tuple:
+        """(function, *args) that returns every camera's statistics over the region as CSV text
+        (run it on a worker); raises :class:`InputError` without a region."""
+        if self.region is None or self.result is None:
             raise InputError("draw a region on the registered images first")
-        kind, shape = self.region
-        desc = (f"rect x {shape[0]:.1f}-{shape[2]:.1f} y {shape[1]:.1f}-{shape[3]:.1f}" if kind == "rect"
-                else f"polygon {len(shape)} corners")
-        return stats_csv([self.stats_for(L.name, mask) for L in self.layers if L.name in self.result.registered],
-                         desc)
+        names = [L.name for L in self.layers if L.name in self.result.registered]
+        return (region_csv, self.result, self.region, names, {n: self._camera_info(n) for n in names})
+
+    def region_csv(self) -> str:
+        """Every camera's statistics over the region (target first), as core.region.stats_csv's CSV."""
+        job = self.region_csv_job()
+        return job[0](*job[1:])
 
     # ------------------------------------------------------------------ cursor and read-out
     def band_for(self, L: Layer) -> int | None:

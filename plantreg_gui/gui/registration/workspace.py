@@ -18,7 +18,8 @@ import numpy as np
 from PySide6.QtCore import QEvent, QSettings, Qt, Signal
 from PySide6.QtGui import QKeySequence
 from PySide6.QtWidgets import (
-    QComboBox, QFileDialog, QInputDialog, QLabel, QMenu, QMessageBox, QProgressBar, QPushButton, QSplitter,
+    QComboBox, QFileDialog, QFrame, QInputDialog, QLabel, QMenu, QMessageBox, QProgressBar, QPushButton,
+    QScrollArea, QSplitter,
     QStatusBar, QTabWidget, QToolBar, QToolButton, QVBoxLayout, QWidget,
 )
 
@@ -209,9 +210,9 @@ class RegistrationWorkspace(QWidget):
         sl.addWidget(self.params_panel)
         self.region_panel = RegionPanel(self.session)
         self.region_panel.tool_changed.connect(self._region_tool)
-        self.region_panel.csv_button.clicked.disconnect()
-        self.region_panel.csv_button.clicked.connect(lambda: self._guard(self.region_panel._ask_csv,
+        self.region_panel.csv_button.clicked.connect(lambda: self._guard(self._ask_region_csv,
                                                                          title="Cannot save the statistics"))
+        self.session.stats_runner = self._run_region_stats  # a 4K cube's statistics take seconds
         sl.addWidget(self.region_panel)
         self.spectrum_label = QLabel("Spectrum under the cursor")
         sl.addWidget(self.spectrum_label)
@@ -220,11 +221,19 @@ class RegistrationWorkspace(QWidget):
         self.spectrum.hide()  # shown once a multi-band image is open (an empty plot says nothing)
         self.spectrum_label.hide()
         side.setMinimumWidth(290)
-        side.setMaximumWidth(360)
+        # the side panel scrolls when its groups are taller than the window (a region's spectrum
+        # below the cursor's): its content never makes the window taller than the screen
+        self.side_scroll = QScrollArea()
+        self.side_scroll.setWidget(side)
+        self.side_scroll.setWidgetResizable(True)
+        self.side_scroll.setFrameShape(QFrame.Shape.NoFrame)
+        self.side_scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.side_scroll.setMinimumWidth(300)
+        self.side_scroll.setMaximumWidth(375)
 
         split = QSplitter(Qt.Orientation.Horizontal)
         split.addWidget(self.tabs)
-        split.addWidget(side)
+        split.addWidget(self.side_scroll)
         split.setStretchFactor(0, 1)
         split.setStretchFactor(1, 0)
         split.setChildrenCollapsible(False)
@@ -722,6 +731,30 @@ class RegistrationWorkspace(QWidget):
             raise InputError(f"cannot write the PNG ({e.strerror or e})", path) from None
         self.readout.setText(f"Saved the {key} view to {path}")
         return path
+
+    def _run_region_stats(self, job: tuple, token: int) -> None:
+        w = Worker(*job)
+        self._start(w, "Region statistics", lambda out: self.session.apply_region_stats(out[0], token),
+                    kind="region")
+
+    def _ask_region_csv(self) -> None:
+        job = self.session.region_csv_job()  # raises (shown) without a region
+        p, _ = QFileDialog.getSaveFileName(self, "Save region statistics", str(Path.home() / "region.csv"),
+                                           "CSV (*.csv)")
+        if not p:
+            return
+        path = Path(p if p.lower().endswith(".csv") else p + ".csv")
+
+        def write(text: str) -> None:
+            from ...core.imageio import atomic_write_text
+
+            try:
+                atomic_write_text(path, text)
+            except OSError as e:
+                raise InputError(f"cannot write the CSV ({e.strerror or e})", path) from None
+            self.readout.setText(f"Saved the region statistics to {path}")
+
+        self._start(Worker(*job), "Region statistics (CSV)", write, kind="region")
 
     def _region_tool(self, mode: str | None) -> None:
         """Regions are drawn on the registered images: draw mode on there, and show them."""
