@@ -25,6 +25,9 @@ def main() -> int:
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     app.setOrganizationName("plantreg-screenshots")  # not the user's remembered settings
+    from plantreg_gui.gui.startup import preload
+
+    preload()  # as plantreg-gui does: the 3D stack before the window
     win = MainWindow()
     w, h = (int(x) for x in args.size.split("x"))
     win.resize(w, h)
