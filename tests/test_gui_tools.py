@@ -229,3 +229,25 @@ def test_band_pickers_in_nm(registered_workspace, qtbot):
     # without wavelengths: the index
     sb.set_wavelengths(None)
     assert sb.text() == str(sb.value())
+
+
+# ---------------------------------------------------------------------- cleanups
+def test_wizard_modalities_come_from_the_registry():
+    from pathlib import Path
+
+    from plantreg_gui.core import modality
+    from plantreg_gui.gui.calibration import rig_page
+
+    assert rig_page.MODALITIES == modality.names()
+    src = Path(rig_page.__file__).read_text()
+    assert '"visible"' not in src  # aliases are the registry's business
+
+
+def test_alias_removed_and_3d_view_without_auto_update():
+    from pathlib import Path
+
+    from plantreg_gui.core import imageio
+    from plantreg_gui.gui.registration import cloud_view
+
+    assert not hasattr(imageio, "atomic_path_suffixed")
+    assert "QtInteractor(self.host, auto_update=False)" in Path(cloud_view.__file__).read_text()
