@@ -251,3 +251,27 @@ def test_alias_removed_and_3d_view_without_auto_update():
 
     assert not hasattr(imageio, "atomic_path_suffixed")
     assert "QtInteractor(self.host, auto_update=False)" in Path(cloud_view.__file__).read_text()
+
+
+def test_region_statistics_keep_the_gui_thread_responsive(registered_workspace, qtbot):
+    """The region's statistics run on a worker (a 4K cube's take seconds). Tolerance as in
+    test_gui_session.test_registration_keeps_the_gui_thread_responsive: 0.2 s times the load per
+    core when above 1 (the GUI thread then waits for a CPU, not for our code)."""
+    import os
+
+    from plantreg_gui.gui.stall_probe import StallProbe
+
+    ws = registered_workspace
+    s = ws.session
+    load = os.getloadavg()[0] / (os.cpu_count() or 1)
+    limit = 0.2 * max(1.0, load)
+    x0, y0, x1, y1 = s.home
+    with StallProbe(trace_after_s=0.12) as probe:
+        for src in ("hyperspectral", "thermal", "rgb"):
+            ws.region_panel.source.setCurrentText(src)
+            s.set_region("polygon", [(x0, y0), (x1, y0), (x1, y1), (x0, (y0 + y1) / 2)])
+            qtbot.waitUntil(lambda src=src: s.region_stats is not None and s.region_stats.source == src
+                            and not ws.is_busy(), timeout=20000)
+        qtbot.wait(100)
+    print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms at load {load:.1f})")
+    assert probe.max_gap < limit, "\n\n".join(probe.traces)
