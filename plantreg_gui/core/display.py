@@ -149,6 +149,19 @@ def colorize(img: np.ndarray, cmap: str = "gray", limits: tuple[float, float] | 
 
 
 # ---------------------------------------------------------------------- multi-band
+def finite_rows(flat: np.ndarray) -> np.ndarray:
+    """``np.isfinite(flat).all(axis=1)`` for (N, C) ``flat``, (N,) bool -- checking all bands only
+    of the rows whose first band is finite: a registered cube is NaN off the object (~85 % of its
+    rows), and the full check of a 204-band cube is a pass over all its values."""
+    if flat.dtype.kind != "f":
+        return np.ones(len(flat), bool)
+    ok = np.isfinite(flat[:, 0])
+    if flat.shape[1] > 1:
+        cand = np.flatnonzero(ok)
+        ok[cand] = np.isfinite(flat[cand, 1:]).all(axis=1)
+    return ok
+
+
 def pca_scores(cube: np.ndarray, mask: np.ndarray | None = None, n: int = 3) -> np.ndarray:
     """First ``n`` principal-component scores of a cube (H, W, B) -> (H, W, n) float32.
 
@@ -159,7 +172,7 @@ def pca_scores(cube: np.ndarray, mask: np.ndarray | None = None, n: int = 3) -> 
     cube = np.asarray(cube)
     H, W, B = cube.shape
     flat = cube.reshape(-1, B)
-    finite = np.isfinite(flat).all(axis=1) if cube.dtype.kind == "f" else np.ones(H * W, bool)
+    finite = finite_rows(flat)
     fit = finite if mask is None else finite & np.asarray(mask, dtype=bool).ravel()
     idx = np.flatnonzero(fit)
     out = np.full((H * W, n), np.nan, np.float32)
@@ -176,12 +189,13 @@ def pca_scores(cube: np.ndarray, mask: np.ndarray | None = None, n: int = 3) -> 
     signs = np.sign(V[np.argmax(np.abs(V), axis=0), np.arange(V.shape[1])])
     V = V * np.where(signs == 0, 1.0, signs)
     k = V.shape[1]
-    # one BLAS matmul over all pixels (NaN rows give NaN scores, as wanted); subtracting the
-    # projected mean afterwards avoids a centred copy of the whole cube
+    # one BLAS matmul over the finite pixels (the others stay NaN); subtracting the projected
+    # mean afterwards avoids a centred copy of the whole cube
     Vf = np.ascontiguousarray(V.astype(np.float32))
-    flat32 = flat if flat.dtype == np.float32 else flat.astype(np.float32)
-    out[:, :k] = flat32 @ Vf - (mean.astype(np.float32) @ Vf)
-    out[~finite] = np.nan
+    rows = np.flatnonzero(finite)
+    sub = flat[rows]
+    sub32 = sub if sub.dtype == np.float32 else sub.astype(np.float32)
+    out[rows, :k] = sub32 @ Vf - (mean.astype(np.float32) @ Vf)
     if k < n:
         out[finite, k:] = 0.0
     return out.reshape(H, W, n)
@@ -205,7 +219,7 @@ class PcaBasis:
         V = self.components.astype(np.float32)
         out = flat32 @ V - (self.mean.astype(np.float32) @ V)
         if flat.dtype.kind == "f":
-            out[~np.isfinite(flat).all(axis=1)] = np.nan
+            out[~finite_rows(flat)] = np.nan
         return out.reshape(H, W, V.shape[1])
 
 
@@ -216,7 +230,7 @@ def fit_pca(cube: np.ndarray, mask: np.ndarray | None = None,
     cube = np.asarray(cube)
     B = cube.shape[2]
     flat = cube.reshape(-1, B)
-    finite = np.isfinite(flat).all(axis=1) if cube.dtype.kind == "f" else np.ones(len(flat), bool)
+    finite = finite_rows(flat)
     fit = finite if mask is None else finite & np.asarray(mask, dtype=bool).ravel()
     idx = np.flatnonzero(fit)
     if idx.size < 2:

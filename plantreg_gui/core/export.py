@@ -383,7 +383,7 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
             n_mapped = int(np.isfinite(reg.values).all(axis=1).sum())
         else:
             reg = np.asarray(reg)
-            n_mapped = int((np.isfinite(reg).all(axis=2) if reg.ndim == 3 else np.isfinite(reg)).sum())
+            n_mapped = int(np.count_nonzero(display.finite_rows(reg.reshape(reg.shape[0] * reg.shape[1], -1))))
         c = _rig_camera(rig, cam)
         cameras[cam] = {
             "modality": c.modality if c is not None else None,
