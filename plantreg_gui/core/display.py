@@ -170,9 +170,17 @@ def finite_rows(flat: np.ndarray) -> np.ndarray:
     if flat.dtype.kind != "f":
         return np.ones(len(flat), bool)
     ok = np.isfinite(flat[:, 0])
-    if flat.shape[1] > 1:
-        cand = np.flatnonzero(ok)
-        ok[cand] = np.isfinite(flat[cand, 1:]).all(axis=1)
+    if flat.shape[1] == 1:
+        return ok
+    cand = np.flatnonzero(ok)
+    step = max(1, (16 << 20) // (4 * flat.shape[1]))  # ~16 MB of values per chunk, never a copy of the cube
+    if len(cand) > len(flat) // 2:  # mostly finite (e.g. hit values): plain row ranges
+        for a in range(0, len(flat), step):
+            ok[a : a + step] = np.isfinite(flat[a : a + step]).all(axis=1)
+    else:
+        for a in range(0, len(cand), step):
+            c = cand[a : a + step]
+            ok[c] = np.isfinite(flat[c, 1:]).all(axis=1)
     return ok
 
 
