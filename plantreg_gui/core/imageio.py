@@ -257,7 +257,9 @@ def _map_envi(h: dict, p, inter: str, data: Path) -> np.ndarray | None:
     (a band-last view of the file's interleave: BSQ gives an (H, W, C) view of (C, H, W)) -- but
     memory-mapped instead of read through three copies (~1.2 s of CPU for the paper's 214 MB cube);
     pages are read when the registration samples them. Copy-on-write: writing to the array never
-    touches the file. None where spectral would transform the values (a reflectance scale
+    touches the file; but a file replaced in place (truncated, rewritten) while a recording is
+    held shows through, and truncation ends the process (SIGBUS) -- write new cubes under a new
+    name and rename them, as every plantreg writer does. None where spectral would transform the values (a reflectance scale
     factor, frame offsets) or the interleave is unknown: the caller reads it with spectral then."""
     scale = h.get("reflectance scale factor")
     if scale is not None and float(scale) != 1.0:
