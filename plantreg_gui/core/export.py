@@ -64,6 +64,7 @@ class ExportContext:
     t_start: float
     written: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    background: Any = None  # _Background: files encoded in a thread while the others are made
 
 
 @dataclass(frozen=True)
@@ -81,14 +82,19 @@ class OutputPart:
 
 
 def _write_registered(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
+    # encoded in a background thread while the previews, the point cloud and the rest are made
+    # here (the codecs release the GIL); waited for before the summary (_wait_background)
     rel = f"registered/{_safe(cam)}.tif"
-    reg = ctx.result.registered[cam]  # tiled, compressed, empty tiles encoded once
-    if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
-        write_tiff_tiled(ctx.folder / rel, reg.shape, np.float32, reg.block, codec=ctx.tiff_codec)
-    else:
-        reg = np.asarray(reg, dtype=np.float32)
-        write_tiff_tiled(ctx.folder / rel, reg.shape, np.float32, dense_tiles(reg), codec=ctx.tiff_codec)
+    ctx.timings.setdefault(kind, 0.0)
+    ctx.background.submit(_write_registered_tiff, ctx.folder / rel, ctx.result.registered[cam], ctx.tiff_codec)
     return rel
+
+
+def _wait_background(ctx: ExportContext, rep: Reporter, fraction: float) -> None:
+    """Wait for the files written in the background (their errors are raised here)."""
+    if ctx.background is not None and ctx.background.pending():
+        rep(fraction, "writing registered images")
+        ctx.timings["registered"] = ctx.timings.get("registered", 0.0) + ctx.background.wait()
 
 
 def _write_preview(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
@@ -247,11 +253,14 @@ def write_outputs(
     if recording is not None and recording.folder is not None:
         keep += [Path(recording.folder), *map(Path, recording.paths.values())]
     check_output_spares_inputs(out, keep)
-    with atomic_output_dir(out, overwrite) as tmp:
-        ctx = ExportContext(tmp, result, rig, recording, cams, preview, tiff_codec, mosaic_tile, inputs, t_start)
+    with atomic_output_dir(out, overwrite) as tmp, _Background() as background:
+        ctx = ExportContext(tmp, result, rig, recording, cams, preview, tiff_codec, mosaic_tile, inputs, t_start,
+                            background=background)
         done = 0.0
         for part, step, weight in steps:
             kind, _, cam = step.partition(":")
+            if part.key == "summary":  # it lists the timings and files: the background's first
+                _wait_background(ctx, rep, done / total)
             rep(done / total, f"writing {_step_label(kind, cam)}")
             t0 = time.perf_counter()
             rel = part.write(ctx, kind, cam, rep.sub(done / total, (done + weight) / total))
@@ -259,10 +268,49 @@ def write_outputs(
                 ctx.timings[kind] = ctx.timings.get(kind, 0.0) + time.perf_counter() - t0
             ctx.written.append(rel)
             done += weight
+        _wait_background(ctx, rep, done / total)
         rep.check()  # a cancel during the last file still leaves nothing behind
     if not rep.cancel.cancelled:  # the folder is complete now: a late cancel changes nothing
         rep(1.0, f"wrote {out}")
     return out
+
+
+def _write_registered_tiff(path: Path, reg: Any, codec: str) -> float:
+    """One ``registered/<camera>.tif`` (tiled, compressed, empty tiles encoded once); seconds taken."""
+    t0 = time.perf_counter()
+    if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
+        write_tiff_tiled(path, reg.shape, np.float32, reg.block, codec=codec)
+    else:
+        reg = np.asarray(reg, dtype=np.float32)
+        write_tiff_tiled(path, reg.shape, np.float32, dense_tiles(reg), codec=codec)
+    return time.perf_counter() - t0
+
+
+class _Background:
+    """One background thread for output files, as a context: leaving it (also by an exception
+    or a cancel) cancels what has not started and waits for what runs, so that no file is
+    written into a folder that is being removed."""
+
+    def __enter__(self) -> "_Background":
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="plantreg-write")
+        self._futures: list = []
+        return self
+
+    def submit(self, fn, *args) -> None:
+        self._futures.append(self._pool.submit(fn, *args))
+
+    def pending(self) -> bool:
+        return bool(self._futures)
+
+    def wait(self) -> float:
+        """Wait for every submitted call (in order; the first error is raised); sum of their results."""
+        futures, self._futures = self._futures, []
+        return float(sum(f.result() for f in futures))
+
+    def __exit__(self, *exc) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
 
 
 def check_output_spares_inputs(out: str | Path, inputs: Iterable[str | Path]) -> None:
@@ -455,7 +503,7 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
             n_mapped = int(np.isfinite(reg.values).all(axis=1).sum())
         else:
             reg = np.asarray(reg)
-            n_mapped = int((np.isfinite(reg).all(axis=2) if reg.ndim == 3 else np.isfinite(reg)).sum())
+            n_mapped = int(np.count_nonzero(display.finite_rows(reg.reshape(reg.shape[0] * reg.shape[1], -1))))
         c = _rig_camera(rig, cam)
         cameras[cam] = {
             "modality": c.modality if c is not None else None,
