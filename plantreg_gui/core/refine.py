@@ -249,6 +249,25 @@ def _bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return top + fv * (bot - top)
 
 
+def _bilinear_uv(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """:func:`_bilinear` for ``u``, ``v`` (N,) already inside [0, w - 1.0001] x [0, h - 1.0001]
+    (exact weights, no clamping, fewer temporaries: the cost's hot path), (N,) float32."""
+    w = img.shape[1]
+    u0 = u.astype(np.int64)
+    v0 = v.astype(np.int64)
+    fu = (u - u0).astype(np.float32)
+    fv = (v - v0).astype(np.float32)
+    flat = img.ravel()
+    i = v0 * w + u0
+    a = flat[i]
+    b = flat[i + 1]
+    c = flat[i + w]
+    d = flat[i + w + 1]
+    top = a + fu * (b - a)
+    bot = c + fu * (d - c)
+    return top + fv * (bot - top)
+
+
 def _increasing(edges: np.ndarray) -> np.ndarray:
     """Make quantile knots strictly increasing (constant images give repeated quantiles)."""
     e = np.asarray(edges, dtype=np.float64)
@@ -272,7 +291,7 @@ class _Level:
     """All recordings at one level for one camera: fixed point sets and binning, concatenated
     so that one evaluation is a handful of numpy calls however many recordings there are."""
 
-    X: np.ndarray            # (n, 3) float64 rig points of every recording
+    XT: np.ndarray           # (3, n) float64 rig points of every recording, as rows (see _project_T)
     rec: np.ndarray          # (n,) int64 recording slot of each point (0 .. R-1)
     cell: np.ndarray         # (n,) int64 (rec * bins + reference bin) * bins: histogram row start
     voff: np.ndarray         # (n,) float64 row offset of the point's recording in ``atlas``
@@ -285,7 +304,7 @@ class _Level:
     rec_index: list[int]     # slot -> index into the caller's recordings
 
     def __len__(self) -> int:
-        return len(self.X)
+        return self.XT.shape[1]
 
 
 def _prepare_recording(rig: Rig, rec: Recording, rays_cam: np.ndarray, p: RefineParams,
@@ -364,26 +383,55 @@ def _project(cam: Camera, X: np.ndarray) -> np.ndarray:
     return np.stack([K[0, 0] * xd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=1)
 
 
+def _project_T(cam: Camera, XT: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_project` of points stored as rows ``XT`` (3, N) float64 -> ``u``, ``v`` (N,) each.
+
+    The cost's hot path: ``R @ XT`` is one small BLAS call, where ``X @ R.T`` with X (N, 3) was
+    measured at 40 ms CPU for 90,000 points with OpenBLAS threads spinning on a loaded machine
+    (this whole function: 3 ms). Same model and result as :func:`_project` (to 1e-12 px)."""
+    if cam.dist.size > 5 and np.any(cam.dist[5:]):
+        uv = project_points(cam, XT.T)[0]
+        return uv[:, 0], uv[:, 1]
+    t = cam.t_cam_rig
+    Xc = cam.R_cam_rig @ XT
+    iz = 1.0 / np.maximum(Xc[2] + t[2], 1e-9)
+    x = (Xc[0] + t[0]) * iz
+    y = (Xc[1] + t[1]) * iz
+    d = np.zeros(5)
+    d[: cam.dist.size] = cam.dist[:5]
+    k1, k2, p1, p2, k3 = d
+    xx, yy, xy = x * x, y * y, x * y
+    r2 = xx + yy
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    K = cam.K
+    u = K[0, 0] * (x * radial + 2 * p1 * xy + p2 * (r2 + 2 * xx)) + K[0, 2]
+    v = K[1, 1] * (y * radial + p1 * (r2 + 2 * yy) + 2 * p2 * xy) + K[1, 2]
+    return u, v
+
+
 def _nid_per_recording(lv: _Level, cam: Camera, cell: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """NID (R,) of each recording slot and its total weight (R,) for camera ``cam``."""
     B = lv.bins
-    uv = _project(cam, lv.X)
+    u, v = _project_T(cam, lv.XT)
     w_img = lv.atlas.shape[1]
     # points count fully inside the image and fade out over ``lv.taper`` px towards its border:
     # the overlap changes smoothly, and points outside carry no (clamped, made-up) values
     with np.errstate(invalid="ignore"):
-        inside = np.minimum(np.minimum(uv[:, 0] + 0.5, w_img - 0.5 - uv[:, 0]),
-                            np.minimum(uv[:, 1] + 0.5, lv.h - 0.5 - uv[:, 1]))
-        wt = np.clip(inside / lv.taper, 0.0, 1.0) * lv.weight
-    u = np.clip(uv[:, 0], 0, w_img - 1.0001)
-    v = np.clip(uv[:, 1], 0, lv.h - 1.0001) + lv.voff
-    q = _bilinear(lv.atlas, np.stack([u, v], axis=1))  # the atlas holds bin positions (see _level_data)
+        inside = np.minimum(np.minimum(u + 0.5, w_img - 0.5 - u), np.minimum(v + 0.5, lv.h - 0.5 - v))
+        wt = np.clip(inside * (1.0 / lv.taper), 0.0, 1.0)
+        wt *= lv.weight
+    np.clip(u, 0, w_img - 1.0001, out=u)
+    np.clip(v, 0, lv.h - 1.0001, out=v)
+    v += lv.voff
+    q = _bilinear_uv(lv.atlas, u, v)  # the atlas holds bin positions (see _level_data)
     i0 = np.minimum(q.astype(np.int64), B - 2)
     fr = q - i0
     base = (lv.cell if cell is None else cell) + i0
     n_cells = lv.n_rec * B * B
-    h = (np.bincount(base, weights=wt * (1.0 - fr), minlength=n_cells)
-         + np.bincount(base + 1, weights=wt * fr, minlength=n_cells)).reshape(lv.n_rec, B, B)
+    wf = wt * fr
+    # one bincount for both soft-binning neighbours (the cell and the next source bin)
+    h = np.bincount(np.concatenate([base, base + 1]), weights=np.concatenate([wt - wf, wf]),
+                    minlength=n_cells).reshape(lv.n_rec, B, B)
     tot = h.sum(axis=(1, 2))
     P = h / np.maximum(tot, 1e-12)[:, None, None]
 
@@ -719,6 +767,7 @@ def _level_data(cam: Camera, dcam: Camera, data: Sequence[_RecData], src_imgs: d
         idx = cand[cam.in_image(uv, margin) & (z > 0)][:n_want]
         if len(idx) < 200:
             continue
+        idx = idx[np.argsort(d.pix[idx], kind="stable")]  # raster order: neighbours sample nearby source pixels
         uv, z = project_points(cam, d.X_rig[idx])
         slot = len(slots)
         img = _blur(src_imgs[i], sig_src)
@@ -747,6 +796,6 @@ def _level_data(cam: Camera, dcam: Camera, data: Sequence[_RecData], src_imgs: d
     if not slots:
         return None, np.zeros(0)
     cat = {k: np.concatenate(v) for k, v in parts.items()}
-    lv = _Level(cat["X"], cat["rec"], cat["cell"], cat["voff"], np.ascontiguousarray(np.concatenate(atlas, axis=0)),
+    lv = _Level(np.ascontiguousarray(cat["X"].T), cat["rec"], cat["cell"], cat["voff"], np.ascontiguousarray(np.concatenate(atlas, axis=0)),
                 cam.height, taper, cat["weight"], len(slots), nb, slots)
     return lv, cat["z"]
