@@ -55,7 +55,7 @@ def main() -> None:
     ap.add_argument("--draws", type=int, default=0)
     a = ap.parse_args()
     truth = demo_rig()
-    for n in a.landmarks:
+    for n in a.landmarks if a.sets > 0 else []:
         rows, cpu = [], []
         for k in range(a.sets):
             plants, unseen = (70 + 3 * k, 71 + 3 * k), 72 + 3 * k

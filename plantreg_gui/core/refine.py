@@ -43,7 +43,9 @@ by a few pixels. A uniform or unrelated image fails the test and gets a warning.
 from __future__ import annotations
 
 import copy
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Sequence
 
@@ -52,11 +54,14 @@ import numpy as np
 
 from .camera import Camera
 from .errors import InputError
-from .progress import Reporter, ensure_reporter
+from .progress import CancelToken, Reporter, ensure_reporter
 from .raycast import pixel_rays_cam, project_points
 from .recording import Recording
 from .register import Meshes, RegistrationParams, build_meshes, filter_depth, transport_pixels
 from .rig import Rig
+
+#: one visibility query on the shared meshes at a time (each is parallel inside Open3D)
+_RAYCAST_LOCK = threading.Lock()
 
 #: what ``free`` may contain (other names are accepted by the caller's landmark fit, not here)
 REFINABLE = frozenset({"focal"})
@@ -99,6 +104,9 @@ class RefineParams:
     #: ... and if the landmarks agreed better with the start pose, keep the start pose
     keep_if_landmarks_disagree: bool = True
     seed: int = 0
+    #: cameras refined at the same time (threads: numpy, OpenCV and Open3D release the GIL in the
+    #: cost's heavy calls). The result does not depend on it; 1 = one after the other.
+    workers: int = 2
 
 
 @dataclass
@@ -567,10 +575,39 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
     for n in names:
         if n not in todo:
             warnings.append(f"{n}: no recording has an image of this camera; not refined")
+    # cameras are independent given the recordings' data: refine them concurrently, with one
+    # progress value (the mean over the cameras) so that the bar does not jump between them
+    fractions = [0.0] * len(todo)
+    lock = threading.Lock()
+    stop = _EitherToken(progress.cancel)  # the caller's cancel, or one camera failed
+
+    def camera_reporter(ci: int) -> Reporter:
+        def report_fraction(f: float, message: str) -> None:
+            with lock:
+                fractions[ci] = f
+                total = sum(fractions) / len(fractions)
+            progress(0.1 + 0.9 * total, message)
+
+        return Reporter(report_fraction, stop)
+
+    def run(ci: int, name: str) -> tuple[dict[str, Any], Camera, list[str]]:
+        return _refine_camera(rig, out_rig.camera(name), dcam, recordings, data, p, focal_free(name),
+                              camera_reporter(ci))
+
+    n_workers = max(1, min(int(p.workers), len(todo)))
+    if n_workers == 1:
+        results = [run(ci, name) for ci, name in enumerate(todo)]
+    else:
+        with ThreadPoolExecutor(n_workers, thread_name_prefix="refine") as pool:
+            futures = [pool.submit(run, ci, name) for ci, name in enumerate(todo)]
+            try:
+                results = [f.result() for f in futures]
+            except BaseException:
+                stop.cancel()  # stop the other cameras at their next cancellation point
+                raise
     for ci, name in enumerate(todo):
-        sub = progress.sub(0.1 + 0.9 * ci / len(todo), 0.1 + 0.9 * (ci + 1) / len(todo))
         cam0 = out_rig.camera(name)
-        entry, cam_new, warn = _refine_camera(rig, cam0, dcam, recordings, data, p, focal_free(name), sub)
+        entry, cam_new, warn = results[ci]
         entry["focal_free"] = focal_free(name)
         if lm is not None:
             before = landmark_residuals(rig, recordings, lm, name)
@@ -599,6 +636,23 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
     return RefineResult(out_rig, report, warnings)
 
 
+class _EitherToken(CancelToken):
+    """Cancelled when the caller's token is, or when :meth:`cancel` is called on this one (which
+    leaves the caller's token alone)."""
+
+    def __init__(self, outer: CancelToken):
+        super().__init__()
+        self.outer = outer
+
+    @property
+    def cancelled(self) -> bool:
+        return self._event.is_set() or self.outer.cancelled
+
+    def raise_if_cancelled(self) -> None:
+        self.outer.raise_if_cancelled()
+        super().raise_if_cancelled()
+
+
 def _replace(rig: Rig, cam: Camera) -> None:
     rig.cameras = [cam if c.name == cam.name else c for c in rig.cameras]
 
@@ -623,7 +677,7 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
     levels_out = []
     warn: list[str] = []
     lv: _Level | None = None
-    with progress.stage(f"{name}: visibility"):
+    with progress.stage(f"{name}: visibility"), _RAYCAST_LOCK:
         # computed once at the start pose, for the union of centres within visibility_radius_m
         # (ray casting only for candidates within twice the coarsest level's reach of the image:
         # the others are never used, and casting them was a third of the setup time)
