@@ -583,10 +583,9 @@ def refine_rig(rig: Rig, recordings: list[Recording], *, cameras: list[str] | No
 
     def camera_reporter(ci: int) -> Reporter:
         def report_fraction(f: float, message: str) -> None:
-            with lock:
-                fractions[ci] = f
-                total = sum(fractions) / len(fractions)
-            progress(0.1 + 0.9 * total, message)
+            with lock:  # reported under the lock: the values arrive in order (never backwards)
+                fractions[ci] = max(fractions[ci], f)
+                progress(0.1 + 0.9 * sum(fractions) / len(fractions), message)
 
         return Reporter(report_fraction, stop)
 
