@@ -314,6 +314,11 @@ class _Level:
     def __len__(self) -> int:
         return self.XT.shape[1]
 
+    @property
+    def X(self) -> np.ndarray:
+        """(n, 3) view of the points (the layout before ``XT``)."""
+        return self.XT.T
+
 
 def _prepare_recording(rig: Rig, rec: Recording, rays_cam: np.ndarray, p: RefineParams,
                        rng: np.random.Generator) -> _RecData:
