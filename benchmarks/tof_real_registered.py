@@ -33,7 +33,7 @@ def main() -> None:
     args = ap.parse_args()
     rig = Rig.load(args.rig)
     rec = Recording.load(ROOT / "resources" / "plant3dimagereg" / "recordings" / args.plant, rig)
-    before = register(rig, rec, "ir", RegistrationParams(flying_filter=False, denoise=False))
+    before = register(rig, rec, "ir", RegistrationParams(flying_filter=False, denoise=False, fill_holes=False))
     after = register(rig, rec, "ir")
     clouds = []
     for name, res, drop in (("before", before, False), ("after", after, True)):

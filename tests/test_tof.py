@@ -269,6 +269,58 @@ def test_mixed_flag_radius_follows_the_camera_blur(realistic):
     assert mixed_radius(rig.camera("rgb"), 1.0) == pytest.approx(1.0)
 
 
+def test_mixed_flag_radius_includes_the_calibration_uncertainty():
+    import dataclasses
+
+    from plantreg_gui.core.mixed import calibration_residual_px, mixed_radius
+
+    rig = demo_rig(thermal_blur_px=1.0)
+    th = rig.camera("thermal")
+    cal = {"calibration": {"method": "landmarks", "per_camera": {"thermal": {"median_px": 2.5, "p90_px": 5.0}}}}
+    assert calibration_residual_px(cal, "thermal") == pytest.approx(2.5)
+    assert calibration_residual_px(cal, "rgb") == 0.0
+    assert calibration_residual_px({"calibration": {"method": "board", "per_camera": {"thermal": {"median_px": 2}}}},
+                                   "thermal") == 0.0  # only a landmark fit's residuals say how far off the mapping is
+    assert calibration_residual_px({}, "thermal") == 0.0
+    assert mixed_radius(th, 1.0, 2.5) == pytest.approx(5.5)
+    keyed = dataclasses.replace(th, extra={**th.extra, "registration_px": 0.5})
+    assert mixed_radius(keyed, 1.0, 2.5) == pytest.approx(3.5)  # the camera's own key wins
+
+
+def test_mixed_flag_covers_a_known_calibration_error(realistic):
+    """The thermal camera's pose off by 3 px (a rig fitted from a few landmarks): stating that
+    uncertainty (``registration_px`` 3) keeps the soil-mixed rims out of the unflagged leaf mean."""
+    import dataclasses
+
+    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.synthetic.textures import Appearance
+
+    rig, scene, rec, gt = realistic  # the thermal image rendered with the true pose
+    cam = rig.camera("ir")
+    o, d = cam.rays_rig()
+    _t, prim, bary = scene.cast(o, d)
+    hit = prim >= 0
+    s = scene.surface(prim[hit], bary[hit])
+    T = np.full(len(d), np.nan)
+    T[hit] = Appearance(scene).temperature(s["points"], s["material"], s["uv"])
+    T = T.reshape(cam.shape)
+    leaf = gt.material >= MAT_LEAF0
+    th = rig.camera("thermal")
+    a = 3.0 / th.K[0, 0]  # 3 px sideways
+    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]) @ th.R_cam_rig
+    err = {}
+    for reg_px in (0.0, 3.0):
+        off = dataclasses.replace(th, R_cam_rig=R, t_cam_rig=-R @ th.center_rig,
+                                  extra={**th.extra, "registration_px": reg_px})
+        rig_off = Rig([off if c.name == "thermal" else c for c in rig.cameras], rig.depth_camera, rig.depth_scale,
+                      rig.roi_min, rig.roi_max)
+        res = register(rig_off, rec, "ir")
+        assert res.stats["mixed_radius_px"]["thermal"] == pytest.approx(3.0 + reg_px)
+        sel = (res.cases["thermal"] == CASE_P1) & leaf & ~res.mixed["thermal"]
+        err[reg_px] = float(np.mean(res.registered["thermal"][sel]) - np.mean(T[sel]))
+    assert abs(err[3.0]) <= 0.01 and abs(err[3.0]) <= 0.5 * abs(err[0.0]), err  # measured +0.003 / +0.015
+
+
 def test_noise_free_registration_is_unchanged_or_better(realistic):
     """Clean (quantised) depth: the clean-up must not make anything worse."""
     rig, scene, rec, _gt = realistic
@@ -312,6 +364,9 @@ def test_register_writes_edge_masks_flying_mask_and_counts(demo_dir, tmp_path):
     assert "flying pixels" in so and "mixed (% of P1)" in so
     s = json.loads((out / "summary.json").read_text())
     assert s["version"] == 2 and s["parameters"]["mixed_radius_px"] == 1.5
+    assert s["parameters"]["fill_holes"] is True and s["tof"]["filled_pixels"] >= 0
+    for cam in ("rgb", "thermal", "hyperspectral"):  # the clean demo: no blur_px, no landmark fit
+        assert s["tof"]["mixed"][cam]["radius_px"] == pytest.approx(1.5)
     assert s["parameters"]["flying_filter"] is True and s["parameters"]["denoise"] is True
     fly = read_image(out / "flying.png")
     assert fly.shape == (576, 640) and set(np.unique(fly)) <= {0, 255}
@@ -333,10 +388,11 @@ def test_register_tof_switches_and_drop_mixed(demo_dir, tmp_path):
     out = tmp_path / "out"
     code, so, se = _run(["register", "--rig", demo_dir / "rig.json", "--recording", demo_dir / "recording",
                          "--target", "ir", "--out", out, "--quiet", "--no-flying-filter", "--no-denoise",
-                         "--drop-mixed"])
+                         "--no-fill-holes", "--drop-mixed"])
     assert code == 0, se
     s = json.loads((out / "summary.json").read_text())
     assert s["parameters"]["flying_filter"] is False and s["parameters"]["denoise"] is False
+    assert s["parameters"]["fill_holes"] is False and s["tof"]["filled_pixels"] == 0
     assert s["tof"]["flying_pixels"] == 0 and s["tof"]["flying_handling"] == "off"
     assert "--no-flying-filter" in s["inputs"]["command"] and "--drop-mixed" in s["inputs"]["command"]
     edge = read_image(out / "cases/thermal_edge.png") == 255

@@ -337,6 +337,7 @@ class Registrar:
         self._float_images: dict[str, np.ndarray] = {}
         self.timings: dict[str, float] = {}
         self.warnings: list[str] = []  # about the inputs, found while preparing (see core/roi.py)
+        self._mixed_radius: dict[str, float] = {}  # source camera -> the mixed flag's radius, its px
 
     # -- caches
     def ray_cache(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
@@ -364,12 +365,13 @@ class Registrar:
     def _mixed(self, scam: Camera, uvh: np.ndarray, case_h: np.ndarray, obj_idx: np.ndarray,
                shape: tuple[int, int]) -> np.ndarray:
         """(H, W) bool: P1 pixels whose footprint in ``scam`` reaches across a silhouette (core/mixed.py)."""
-        from .mixed import mixed_radius, silhouette_distance
+        from .mixed import calibration_residual_px, mixed_radius, silhouette_distance
 
         meshes = self.meshes
         assert meshes is not None
         out = np.zeros(shape[0] * shape[1], dtype=bool)
-        r = mixed_radius(scam, self.params.mixed_radius_px)
+        r = mixed_radius(scam, self.params.mixed_radius_px, calibration_residual_px(self.rig.extra, scam.name))
+        self._mixed_radius[scam.name] = r
         p1 = np.flatnonzero(case_h == CASE_P1)
         unc = meshes.uncertainty
         if r <= 0 or len(p1) == 0 or unc.n_triangles == 0:
@@ -536,6 +538,7 @@ class Registrar:
             "flying_pixels": int(meshes.flying.sum()) if meshes.flying is not None else 0,
             "filled_pixels": int(meshes.filled.sum()) if meshes.filled is not None else 0,
             "mixed_pixels": {cam: int(m.sum()) for cam, m in mixed.items()},
+            "mixed_radius_px": {cam: round(self._mixed_radius.get(cam, 0.0), 3) for cam in mixed},
         }
         progress(1.0, "done")
         return RegistrationResult(
