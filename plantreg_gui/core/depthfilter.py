@@ -284,7 +284,8 @@ def clean_depth(depth_m: np.ndarray, flying: bool = True, jump_rel: float = 0.01
     exclude = fly
     if fill:
         got, filled = fill_holes(base, jump_rel)
-        filled &= ~fly  # removed flying pixels stay removed
+        if not repair:
+            filled &= ~fly  # asked to remove flying pixels: they stay removed
         base = np.where(filled, got, base)
         exclude = fly | filled
     out = denoise_depth(base, denoise_tol_rel, denoise_size, exclude=exclude) if denoise else base
