@@ -96,10 +96,13 @@ def _silhouettes(rig, rec, out: Path) -> None:
     ok = np.isfinite(pv[edges]).all(axis=(1, 2))
     ends = np.round((pv[edges[ok]] + 0.5) * S * 8).astype(np.int32)
     cv2.polylines(im, list(ends.reshape(-1, 2, 1, 2)), False, (0, 200, 0), 1, cv2.LINE_AA, 3)
-    ys, xs = np.nonzero(g < np.percentile(g, 60))  # crop to the plant (cooler than the floor)
-    y0, y1 = max(0, int(np.percentile(ys, 1)) - 20) * S, min(raw.shape[0], int(np.percentile(ys, 99)) + 20) * S
-    x0, x1 = max(0, int(np.percentile(xs, 1)) - 20) * S, min(raw.shape[1], int(np.percentile(xs, 99)) + 20) * S
-    cv2.imwrite(str(out), im[y0:y1, x0:x1])
+    p = pv[np.unique(edges[ok])]
+    p = p[np.isfinite(p).all(axis=1) & cam.in_image(p)]
+    c = np.median(p, axis=0)  # the plant's middle; a 400 x 380 px window around it
+    (x0, y0), (x1, y1) = c - (200, 190), c + (200, 190)
+    x0, y0 = max(0, int(x0)) * S, max(0, int(y0)) * S
+    x1, y1 = min(raw.shape[1], int(x1)) * S, min(raw.shape[0], int(y1)) * S
+    cv2.imwrite(str(out), im[y0:y1, x0:x1], [cv2.IMWRITE_PNG_COMPRESSION, 9])
     print(f"wrote {out}")
 
 
