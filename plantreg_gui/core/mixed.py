@@ -31,9 +31,9 @@ other rig 0. Points within ``r`` are flagged.
 
 What it does not catch: silhouettes the depth camera did not measure (a surface it could not see
 at all, thin structures below its resolution, a leaf's fold turning away from the source inside
-one smooth mesh surface), mixing through translucency or reflections, and any blur wider than
-the stated ``blur_px``. It flags conservatively near cut lines of steep surfaces that are not
-real edges.
+one smooth mesh surface), mixing through translucency or reflections, any blur wider than
+the stated ``blur_px``, and calibration errors larger than ``registration_px``. It flags
+conservatively near cut lines of steep surfaces that are not real edges.
 """
 
 from __future__ import annotations
