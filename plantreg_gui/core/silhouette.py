@@ -69,6 +69,9 @@ class SilhouetteParams:
     #: pose priors around the start rig (weak)
     rotation_deg: float = 5.0
     position_m: float = 0.05
+    #: also fit the camera's focal length (fx, fy scaled together) with this prior sigma (relative)
+    free_focal: bool = False
+    focal_rel: float = 0.05
     #: landmark click uncertainty (px) per camera name; others use ``landmark_px_default``
     landmark_px: dict[str, float] = field(default_factory=dict)
     landmark_px_default: float = 1.5
@@ -221,9 +224,12 @@ class SilhouetteResult:
     warnings: list[str] = field(default_factory=list)
 
 
-def _camera_at(base: Camera, x: np.ndarray) -> Camera:
-    """Camera with rotation ``exp(x[:3]) @ base.R`` and optical centre ``x[3:6]`` (rig frame)."""
+def _camera_at(base: Camera, x: np.ndarray, log_focal: float = 0.0) -> Camera:
+    """Camera with rotation ``exp(x[:3]) @ base.R``, optical centre ``x[3:6]`` (rig frame) and
+    focal lengths scaled by ``exp(log_focal)``."""
     cam = copy.deepcopy(base)
+    cam.K[0, 0] *= math.exp(log_focal)
+    cam.K[1, 1] *= math.exp(log_focal)
     R = cv2.Rodrigues(np.asarray(x[:3], np.float64))[0] @ base.R_cam_rig
     cam.R_cam_rig, cam.t_cam_rig = R, -R @ np.asarray(x[3:6], np.float64)
     return cam
@@ -260,7 +266,11 @@ def fit_camera(rig: Rig, camera: str, views: Sequence[SilhouetteView], params: S
     sig_lm = p.landmark_px.get(camera, p.landmark_px_default)
     nv = len(views)
     nb = nv if (p.fit_bias and use_silhouette) else 0
-    x0 = np.concatenate([np.zeros(3), base.center_rig, np.zeros(nb)])
+    nf = 1 if p.free_focal else 0
+    x0 = np.concatenate([np.zeros(3), base.center_rig, np.zeros(nb + nf)])
+
+    def cam_of(x: np.ndarray) -> Camera:
+        return _camera_at(base, x, x[6 + nb] if nf else 0.0)
     n_lm = sum(len(v.lm_uv) for v in views)
     if not use_silhouette and n_lm < 6:
         raise InputError(f"{camera}: {n_lm} landmarks, fewer than the 6 a pose needs")
@@ -271,7 +281,8 @@ def fit_camera(rig: Rig, camera: str, views: Sequence[SilhouetteView], params: S
     h, w = base.shape
 
     def residuals(x: np.ndarray, active: list[np.ndarray], scale: float) -> np.ndarray:
-        cam = _camera_at(base, x)
+        progress.check()  # a cancellation point per evaluation (each is milliseconds)
+        cam = cam_of(x)
         out = []
         if use_silhouette:
             for i, v in enumerate(views):
@@ -291,12 +302,14 @@ def fit_camera(rig: Rig, camera: str, views: Sequence[SilhouetteView], params: S
                 out.append((_cauchy(r, p.landmark_robust_px) / sig_lm).ravel())
         pri = [x[:3] / math.radians(p.rotation_deg), (x[3:6] - base.center_rig) / p.position_m]
         if nb:
-            pri.append(x[6:] / p.bias_sigma_px)
+            pri.append(x[6:6 + nb] / p.bias_sigma_px)
+        if nf:
+            pri.append(x[6 + nb:] / p.focal_rel)
         out += pri
         return np.concatenate(out)
 
     def active_sets(x: np.ndarray) -> list[np.ndarray]:
-        cam = _camera_at(base, x)
+        cam = cam_of(x)
         act = []
         for v in views:
             uv, z = cam.project(v.X_rig)
@@ -316,7 +329,7 @@ def fit_camera(rig: Rig, camera: str, views: Sequence[SilhouetteView], params: S
         x, nfev = res.x, nfev + res.nfev
     act = active_sets(x)
     end_cost = float(np.sum(residuals(x, act, scales[-1]) ** 2))
-    cam = _camera_at(base, x)
+    cam = cam_of(x)
     per_view = {}
     for i, v in enumerate(views):
         e: dict[str, Any] = {"points": int(act[i].sum())}
@@ -334,6 +347,7 @@ def fit_camera(rig: Rig, camera: str, views: Sequence[SilhouetteView], params: S
     report = {"camera": camera, "start_cost": start_cost, "end_cost": end_cost, "evaluations": int(nfev),
               "rotation_change_deg": float(np.degrees(np.linalg.norm(dR))),
               "position_change_m": float(np.linalg.norm(cam.center_rig - base.center_rig)),
+              "focal_change_rel": float(math.exp(x[6 + nb]) - 1.0) if nf else 0.0,
               "views": per_view, "silhouette": use_silhouette, "landmarks": n_lm,
               "seconds": round(time.perf_counter() - t0, 2)}
     progress(1.0, f"{camera}: silhouette fit done")
