@@ -59,7 +59,7 @@ class SilhouetteParams:
     loss: str = "cauchy"
     #: one recording's outline in one camera counts like this many independent landmark-like points
     #: (outline points are strongly correlated; this sets the silhouette's weight against landmarks)
-    points_weight: float = 30.0
+    points_weight: float = 3.0
     #: assumed outline uncertainty (px) the silhouette residuals are divided by
     edge_px: float = 1.0
     #: prior sigma of the per-recording edge offset (px)
@@ -378,3 +378,62 @@ def fit_rig_silhouette(rig: Rig, views: dict[str, Sequence[SilhouetteView]], par
     calib["silhouette"] = report
     out.extra["calibration"] = calib
     return out, report
+
+
+def fit_rig_recordings(rig: Rig, recordings: Sequence[Any], landmarks: dict[str, Sequence[Any]] | None = None,
+                       cameras: Sequence[str] | None = None, params: SilhouetteParams | None = None,
+                       progress: Reporter | None = None) -> tuple[Rig, dict[str, Any]]:
+    """:func:`fit_rig_silhouette` on loaded recordings (:class:`~.recording.Recording`).
+
+    ``landmarks``: recording folder (resolved absolute path, str) -> its landmark points
+    (:class:`~.landmarks.Landmark`), used as a term of the fit with their click uncertainty;
+    ``cameras``: default every camera but the depth camera that some recording has an image of."""
+    progress = ensure_reporter(progress)
+    p = params or SilhouetteParams()
+    dcam = rig.depth()
+    names = list(cameras) if cameras is not None else [
+        c.name for c in rig.cameras if c.name != dcam.name and any(c.name in r.images for r in recordings)]
+    views: dict[str, list[SilhouetteView]] = {n: [] for n in names}
+    for i, rec in enumerate(recordings):
+        progress(0.2 * i / max(1, len(recordings)), "silhouette fit: plant outlines")
+        rec.check(rig)
+        depth_m = rec.depth_m(rig.depth_scale)
+        dmask = depth_plant_mask(rig, depth_m, p.min_component)
+        X = outline_points(rig, depth_m, dmask, p.inset_px, p.max_points)
+        key = str(rec.folder.resolve()) if rec.folder is not None else f"recording {i + 1}"
+        pts = list((landmarks or {}).get(key, []))
+        for n in names:
+            if n not in rec.images:
+                continue
+            v = SilhouetteView(key, X, signed_distance(source_plant_mask(rec.images[n], p.min_component)))
+            mine = [lm for lm in pts if n in lm.cameras]
+            if mine:
+                lX, ok = landmark_points(rig, depth_m, np.array([lm.depth_uv for lm in mine]))
+                v.lm_X, v.lm_uv = lX[ok], np.array([lm.cameras[n] for lm in mine])[ok]
+            views[n].append(v)
+    return fit_rig_silhouette(rig, {n: v for n, v in views.items() if v}, p, progress.sub(0.2, 1.0))
+
+
+def outline_agreement(cam: Camera, view: SilhouetteView, near_px: float = 4.0, border_px: float = 4.0) -> dict[str, Any]:
+    """How well ``cam`` puts the depth camera's outline on the source image's outline: a check that
+    needs no landmarks. Over outline points projecting inside the image: ``median_abs_px`` and
+    ``within_2px`` of the signed distance, and a least-squares fit ``d = offset + n . shift`` over
+    the points within ``near_px`` (``n`` the source outline's outward normal): ``shift_px`` (u, v)
+    is the image translation the outlines imply for this recording (0 = consistent), ``offset_px``
+    the edge offset between the two modalities' masks."""
+    uv, z = cam.project(view.X_rig)
+    ok = cam.in_image(np.nan_to_num(uv, nan=-1e3), margin=border_px) & (z > 0)
+    if ok.sum() < 10:
+        return {"points": int(ok.sum())}
+    uv = uv[ok]
+    d = _sample(view.sdf, uv)
+    gy, gx = np.gradient(cv2.GaussianBlur(view.sdf, (0, 0), 1.0))
+    n = np.stack([_sample(gx, uv), _sample(gy, uv)], axis=1)
+    sel = np.abs(d) < near_px
+    out: dict[str, Any] = {"points": int(ok.sum()), "median_abs_px": float(np.median(np.abs(d))),
+                           "within_2px": float(np.mean(np.abs(d) < 2.0))}
+    if sel.sum() >= 10:
+        A = np.concatenate([np.ones((int(sel.sum()), 1)), n[sel]], axis=1)
+        sol = np.linalg.lstsq(A, d[sel], rcond=None)[0]
+        out["offset_px"], out["shift_px"] = float(sol[0]), [float(sol[1]), float(sol[2])]
+    return out
