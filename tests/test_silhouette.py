@@ -70,3 +70,30 @@ def test_signed_distance_zero_between_plant_and_background():
     assert sdf[10, 10] < -4 and sdf[0, 0] > 4
     # bilinear zero crossing half-way between pixel 14 (plant) and 15 (background)
     assert sdf[10, 14] == pytest.approx(-0.5) and sdf[10, 15] == pytest.approx(0.5)
+
+
+def test_cli_fit_rig_silhouette_without_landmarks(setup, tmp_path, capsys):
+    """``plantreg fit-rig --silhouette`` with a landmarks file without points: the images alone."""
+    from plantreg_gui import cli
+    from plantreg_gui.core.landmarks import LandmarkSet
+
+    rig, recs = setup
+    ls = LandmarkSet(base=tmp_path)
+    for s, r in zip(SCENES, recs):
+        r.save(tmp_path / "recordings" / f"plant{s}")
+        ls.recordings[f"recordings/plant{s}"] = []
+    ls.save(tmp_path / "landmarks.json")
+    start = perturb_rig(rig, np.random.default_rng(8), rotation_deg=2.0, position_m=0.02, focal_rel=0.0)
+    start.save(tmp_path / "start.json")
+    out = tmp_path / "fitted.json"
+    code = cli.main(["fit-rig", "--rig", str(tmp_path / "start.json"), "--landmarks", str(tmp_path / "landmarks.json"),
+                     "--out", str(out), "--silhouette", "--quiet"])
+    stdout, err = capsys.readouterr()
+    assert code == 0, err
+    assert "silhouette fit" in stdout and "thermal" in stdout
+    fitted = Rig.load(out)
+    assert fitted.extra["calibration"]["method"] == "silhouette"
+    X = np.concatenate([_views(rig, "rgb", rig, recs)[i].X_rig for i in range(len(recs))])  # the plants' outlines
+    for cam in ("rgb", "thermal"):
+        e = np.linalg.norm(fitted.camera(cam).project(X)[0] - rig.camera(cam).project(X)[0], axis=1)
+        assert np.median(e) <= 1.0, (cam, np.median(e))

@@ -78,10 +78,10 @@ def run(args: argparse.Namespace) -> int:
         method = "landmarks"
     elif args.refine or args.silhouette:  # no points: refine from the images alone, starting from the start rig
         landmarks.check_recordings()
-        fitted, report, warnings, method = rig, {"landmarks_used": 0}, [], "refine"
+        fitted, report, warnings, method = rig, {"landmarks_used": 0}, [], ("refine" if args.refine else "start")
     else:
-        raise InputError("the landmarks file has no points (add some, or pass --refine to refine from the "
-                         "images alone)", args.landmarks)
+        raise InputError("the landmarks file has no points (add some, or pass --refine or --silhouette to fit "
+                         "from the images alone)", args.landmarks)
     if args.refine:
         # the refinement is its own module (core/refine.py); imported only when asked for
         from ..core.recording import Recording
@@ -138,7 +138,7 @@ def _silhouette(args: argparse.Namespace, fitted, landmarks, report: dict, metho
     by_folder = {str(landmarks.folder(k).resolve()): pts for k, pts in landmarks.recordings.items()}
     rig, srep = fit_rig_recordings(fitted, recordings, by_folder, progress=Reporter(cli.StderrProgress(quiet=args.quiet)))
     report["silhouette"] = srep
-    return rig, method + "+silhouette"
+    return rig, ("silhouette" if method == "start" else method + "+silhouette")
 
 
 def _silhouette_table(rep: dict) -> str:
