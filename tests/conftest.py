@@ -63,6 +63,31 @@ def workspace_session_outputs(demo_registered) -> tuple[dict, dict]:
     return loaded, reg
 
 
+@pytest.fixture(autouse=True)
+def _gui_startup(request):
+    """GUI tests start as ``plantreg-gui`` does: the 3D stack imported before any window exists
+    (gui/startup.py). Once per process; non-GUI tests skip it."""
+    if request.node.get_closest_marker("gui") is None:
+        yield
+        return
+    from PySide6.QtWidgets import QApplication
+
+    from plantreg_gui.gui.startup import preload
+
+    preload()
+    # Tests share one QApplication: one that quit it would make every later nested event loop
+    # (qtbot.wait, QDialog.exec) return at once -- workers' results never arrive, tests hang.
+    quits = []
+    mp = pytest.MonkeyPatch()
+    mp.setattr(QApplication, "exit", staticmethod(lambda code=0: quits.append(code)))
+    mp.setattr(QApplication, "quit", staticmethod(lambda: quits.append(0)))
+    try:
+        yield
+    finally:
+        mp.undo()
+    assert not quits, "the test quit the shared QApplication"
+
+
 @pytest.fixture
 def no_qt_leaks(qapp):
     """Fail a test that leaves top-level widgets open or worker threads running (as napari's and

@@ -502,8 +502,10 @@ def test_screenshot_of_page_1_does_not_wait_for_detection(qtbot, shared_data, tm
         w = win.wizard
         assert w.page == 1 and w.is_busy() and not w.page_busy()
         out = tmp_path / "page1.png"
-        win.screenshot_when_idle(out, timeout=600)
-        qtbot.waitUntil(out.is_file, timeout=600_000)
+        codes = []
+        win.screenshot_when_idle(out, timeout=600, done=codes.append)
+        qtbot.waitUntil(lambda: bool(codes), timeout=600_000)
+        assert codes == [0] and out.is_file()
         assert not w.model.detections_complete()  # taken before detection ended
         w.go_to_page(2)
         assert w.page_busy()  # page 2 shows the detections: it waits for them

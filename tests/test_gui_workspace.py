@@ -21,16 +21,20 @@ pytestmark = pytest.mark.gui
 
 
 def _wait(qapp, pred, timeout: float = 120.0) -> None:
-    """Run the Qt event loop until ``pred()`` is true (fails after ``timeout`` seconds)."""
-    from PySide6.QtCore import QEventLoop, QTimer
+    """Run the Qt event loop until ``pred()`` is true (fails after ``timeout`` seconds).
+
+    Processes events and sleeps instead of a nested event loop quit by a timer: if such a loop
+    returns at once (it does once the application is quitting), every pass would leave a pending
+    timer behind -- millions of them, and the teardown's event processing never ends."""
+    from PySide6.QtCore import QEventLoop
+    from PySide6.QtWidgets import QApplication
 
     t0 = time.monotonic()
     while not pred():
         if time.monotonic() - t0 > timeout:
             pytest.fail("timed out waiting for the workspace")
-        loop = QEventLoop()
-        QTimer.singleShot(10, loop.quit)
-        loop.exec()
+        QApplication.processEvents(QEventLoop.ProcessEventsFlag.AllEvents, 10)
+        time.sleep(0.005)
 
 
 @pytest.fixture(scope="module")

@@ -56,6 +56,9 @@ def main(argv: list[str] | None = None) -> int:
     app.setApplicationName("plantreg")
     app.setOrganizationName("plantreg")
     app.setApplicationVersion(__version__)
+    from .startup import preload_with_splash
+
+    preload_with_splash(app, __version__)  # the 3D stack, before any window takes input
     win = MainWindow()
     win.resize(w, h)
     win.show()
@@ -73,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
 
         show_error(win, "Cannot open", str(e))
     if args.screenshot:
-        win.screenshot_when_idle(args.screenshot, args.timeout)
+        win.screenshot_when_idle(args.screenshot, args.timeout, done=app.exit)
     return app.exec()
 
 

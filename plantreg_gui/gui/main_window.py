@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 from PySide6.QtCore import QTimer
 from PySide6.QtGui import QIcon
@@ -76,8 +77,12 @@ class MainWindow(QMainWindow):
         return self.workspace.is_busy() or self.wizard.page_busy() or self.landmarks.is_busy()
 
     # ------------------------------------------------------------------ screenshots
-    def screenshot_when_idle(self, path: Path, timeout: float) -> None:
-        """Poll until no view is busy (and stays idle briefly), then grab the window and quit."""
+    def screenshot_when_idle(self, path: Path, timeout: float,
+                             done: Callable[[int], None] | None = None) -> None:
+        """Poll until no view is busy (and stays idle briefly), then grab the window and call
+        ``done(exit code)``: 0 saved, 1 an error dialog was shown, 3 timed out. ``plantreg-gui
+        --screenshot`` passes ``QApplication.exit``; the window itself never quits the application
+        (a quit application makes every later nested event loop return at once)."""
         from .workers import SHOWN_ERRORS
 
         t0 = time.monotonic()
@@ -99,7 +104,8 @@ class MainWindow(QMainWindow):
             errors = SHOWN_ERRORS[n_errors:]
             for title, msg in errors:  # shown in a dialog nobody will see: say it and fail
                 print(f"plantreg-gui: error: {title}: {msg}", file=sys.stderr)
-            QApplication.instance().exit(1 if errors else 0 if now - t0 < timeout else 3)
+            if done is not None:
+                done(1 if errors else 0 if now - t0 < timeout else 3)
 
         timer = QTimer(self)
         timer.timeout.connect(tick)

@@ -8,8 +8,6 @@ on the GUI thread; :func:`show_error` is the one place where errors become dialo
 
 from __future__ import annotations
 
-import importlib
-import threading
 import traceback
 import weakref
 from typing import Any, Callable
@@ -19,24 +17,6 @@ from PySide6.QtWidgets import QMessageBox, QWidget
 
 from ..core.errors import Cancelled, PlantregError
 from ..core.progress import CancelToken, Reporter
-
-
-#: Modules the GUI will need later that are slow to import (e.g. VTK for the 3D view): the first
-#: worker job imports them on its thread, before its own work, so the GUI thread does not. Under
-#: a lock, so that no two threads import them at the same time (concurrent imports of
-#: interdependent modules can deadlock: Python raises _DeadlockError in one of them).
-PREIMPORT: list[str] = []
-_PREIMPORT_LOCK = threading.Lock()
-
-
-def _preimport() -> None:
-    with _PREIMPORT_LOCK:
-        while PREIMPORT:
-            name = PREIMPORT.pop(0)
-            try:
-                importlib.import_module(name)
-            except Exception:  # noqa: BLE001 - the view that needs it reports the failure itself
-                pass
 
 
 class _Runner(QObject):
@@ -53,7 +33,6 @@ class _Runner(QObject):
     def run(self) -> None:
         reporter = Reporter(lambda f, m: self.progress.emit(f, m), self._token)
         try:
-            _preimport()
             result = self._fn(*self._args, progress=reporter, **self._kwargs)
         except Cancelled:
             self.cancelled.emit()

@@ -13,16 +13,9 @@ from PySide6.QtWidgets import (
     QCheckBox, QComboBox, QHBoxLayout, QLabel, QSpinBox, QSplitter, QVBoxLayout, QWidget,
 )
 
-from ..workers import PREIMPORT
 from .model import Cloud
 
 MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
-
-
-# pyvista/VTK take 1-5 s to import; imported on the GUI thread when the 3D tab was first opened
-# they froze it. The first worker job imports them instead (see workers.PREIMPORT).
-if "pyvistaqt" not in PREIMPORT:
-    PREIMPORT.append("pyvistaqt")
 
 
 class CloudView(QWidget):

@@ -1,0 +1,59 @@
+"""What the application loads before its window appears.
+
+VTK (through pyvista/pyvistaqt) takes ~2 s to import, and most of that time is spent in C code
+that holds the GIL (extension-module initialisation, PySide6's ``import *`` in qtpy). Importing it
+on a worker thread therefore still froze the GUI thread for 0.2-0.3 s at a time, in the middle of
+the user's first registration. It is imported here instead, once, behind a splash screen, before
+any window can take input.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+
+#: Slow modules every session needs sooner or later (the 3D views).
+HEAVY_MODULES: tuple[str, ...] = ("pyvista", "pyvistaqt")
+
+
+def preload(modules: tuple[str, ...] = HEAVY_MODULES) -> float:
+    """Import ``modules`` on the calling (GUI) thread; returns the seconds it took. A module that
+    fails to import is left for the view that needs it to report."""
+    t0 = time.perf_counter()
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 - reported by the view that needs it
+            pass
+    return time.perf_counter() - t0
+
+
+def preload_with_splash(app, version: str) -> float:
+    """:func:`preload` behind a small splash screen (nothing to click while it runs)."""
+    from PySide6.QtCore import Qt
+    from PySide6.QtGui import QColor, QFont, QPainter, QPixmap
+    from PySide6.QtWidgets import QSplashScreen
+
+    pix = QPixmap(440, 120)
+    pix.fill(QColor("#20262e"))
+    p = QPainter(pix)
+    p.setPen(QColor("#e8eef4"))
+    f = QFont()
+    f.setPointSize(18)
+    f.setBold(True)
+    p.setFont(f)
+    p.drawText(24, 52, "plantreg")
+    f.setPointSize(10)
+    f.setBold(False)
+    p.setFont(f)
+    p.drawText(26, 78, f"version {version} — multimodal 3D registration")
+    p.end()
+    splash = QSplashScreen(pix)
+    splash.showMessage("Loading the 3D viewer…", Qt.AlignmentFlag.AlignBottom | Qt.AlignmentFlag.AlignLeft,
+                       QColor("#9fb3c8"))
+    splash.show()
+    app.processEvents()
+    secs = preload()
+    splash.close()
+    splash.deleteLater()
+    return secs
