@@ -34,7 +34,8 @@ def setup():
 
 
 def _views(start, cam, rig, recs):
-    return [S.make_view(start, cam, f"scene{s}", r.depth_m(rig.depth_scale), r.images[cam]) for s, r in zip(SCENES, recs)]
+    return [S.make_view(start, cam, f"scene{s}", r.depth_m(rig.depth_scale), r.images[cam])
+            for s, r in zip(SCENES, recs)]
 
 
 @pytest.mark.parametrize("cam, limit_px", [("rgb", 0.5), ("thermal", 1.0)])

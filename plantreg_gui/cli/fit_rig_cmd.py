@@ -136,7 +136,8 @@ def _silhouette(args: argparse.Namespace, fitted, landmarks, report: dict, metho
     folders += [f.resolve() for f in args.recording if f.resolve() not in folders]
     recordings = [Recording.load(f, fitted) for f in folders]
     by_folder = {str(landmarks.folder(k).resolve()): pts for k, pts in landmarks.recordings.items()}
-    rig, srep = fit_rig_recordings(fitted, recordings, by_folder, progress=Reporter(cli.StderrProgress(quiet=args.quiet)))
+    progress = Reporter(cli.StderrProgress(quiet=args.quiet))
+    rig, srep = fit_rig_recordings(fitted, recordings, by_folder, progress=progress)
     report["silhouette"] = srep
     return rig, ("silhouette" if method == "start" else method + "+silhouette")
 
@@ -144,7 +145,8 @@ def _silhouette(args: argparse.Namespace, fitted, landmarks, report: dict, metho
 def _silhouette_table(rep: dict) -> str:
     import numpy as np
 
-    lines = ["silhouette fit:", "  camera          recordings  outline median px  landmarks median px (before -> after)"]
+    lines = ["silhouette fit:",
+             "  camera          recordings  outline median px  landmarks median px (before -> after)"]
     for name, r in rep["cameras"].items():
         med = [v["outline_median_px"] for v in r["views"].values() if "outline_median_px" in v]
         b = [e for v in r["views"].values() for e in v.get("landmarks_px", [])]

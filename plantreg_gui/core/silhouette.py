@@ -414,7 +414,8 @@ def fit_rig_recordings(rig: Rig, recordings: Sequence[Any], landmarks: dict[str,
     return fit_rig_silhouette(rig, {n: v for n, v in views.items() if v}, p, progress.sub(0.2, 1.0))
 
 
-def outline_agreement(cam: Camera, view: SilhouetteView, near_px: float = 4.0, border_px: float = 4.0) -> dict[str, Any]:
+def outline_agreement(cam: Camera, view: SilhouetteView, near_px: float = 4.0,
+                      border_px: float = 4.0) -> dict[str, Any]:
     """How well ``cam`` puts the depth camera's outline on the source image's outline: a check that
     needs no landmarks. Over outline points projecting inside the image: ``median_abs_px`` and
     ``within_2px`` of the signed distance, and a least-squares fit ``d = offset + n . shift`` over

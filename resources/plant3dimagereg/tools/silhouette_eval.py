@@ -81,7 +81,8 @@ def only(cam: str, start_name: str) -> None:
     print(f"{cam} outlines only:", summary(errors(start, r.camera, cam, PL)), f"({time.time() - t:.0f} s)")
     for p, v in zip(PL, vs):
         a = S.outline_agreement(r.camera, v)
-        print(f"   {p:16s} median |d| {a['median_abs_px']:.2f}  shift ({a['shift_px'][0]:+.2f}, {a['shift_px'][1]:+.2f})")
+        sx, sy = a["shift_px"]
+        print(f"   {p:16s} median |d| {a['median_abs_px']:.2f}  shift ({sx:+.2f}, {sy:+.2f})")
 
 
 def lopo(cam: str, Ks: list[float], extra: dict[str, str]) -> None:
