@@ -1,7 +1,7 @@
 """``plantreg fit-rig``: fit a rig's cameras to landmarks clicked in the recordings themselves.
 
     plantreg fit-rig --rig START --landmarks LANDMARKS.json --out RIG
-                     [--free focal,principal,k1] [--refine] [--recording DIR ...] [--overwrite] [--quiet]
+                     [--free focal,principal,k1] [--refine] [--silhouette] [--recording DIR ...] [--overwrite] [--quiet]
 
 Writes a normal rig file whose ``"calibration"`` entry records the method, the landmarks used,
 every residual and the leave-one-recording-out residuals, and prints the per-camera residual
