@@ -5,6 +5,7 @@ Run from the project root with the venv's python and PYTHONPATH = project root:
   python resources/plant3dimagereg/tools/silhouette_eval.py agree [RIG]          # outline agreement of a rig
   python resources/plant3dimagereg/tools/silhouette_eval.py only CAM nominal|rig # outlines alone, no landmarks
   python resources/plant3dimagereg/tools/silhouette_eval.py lopo CAM K[,K...] [free_focal=1]
+  python resources/plant3dimagereg/tools/silhouette_eval.py clicks CAM         # where the clicks sit in the masks
 
 ``lopo``: for each plant with landmarks of CAM, the start is the landmark fit (``rigfit``,
 ``--free ir:k1``, this camera) on the OTHER plants' landmarks (the nominal rig where they are
@@ -117,12 +118,31 @@ def lopo(cam: str, Ks: list[float], extra: dict[str, str]) -> None:
         print(f"K={K:g} leave-one-plant-out: {summary(lo)}  ||  all-fit: {summary(al)}")
 
 
+def clicks(cam: str) -> None:
+    """Signed distance of every landmark click to its own image's plant outline (< 0 = inside)."""
+    ds, dd = [], []
+    for p in PL:
+        pts = [lm for lm in lms.recordings.get("recordings/" + p, []) if cam in lm.cameras]
+        if not pts:
+            continue
+        sdf_s = S.signed_distance(S.source_plant_mask(recs[p].images[cam]))
+        sdf_d = S.signed_distance(S.depth_plant_mask(shipped, depth[p]))
+        for lm in pts:
+            ds.append(float(S._sample(sdf_s, lm.cameras[cam][None])[0]))
+            dd.append(float(S._sample(sdf_d, lm.depth_uv[None])[0]))
+            print(f"{p:16s} {cam} click {ds[-1]:+.2f} px  depth-camera click {dd[-1]:+.2f} px  {lm.note[:50]}")
+    print(f"median: {cam} clicks {np.median(ds):+.2f} px from the {cam} outline, depth-camera clicks "
+          f"{np.median(dd):+.2f} px from the depth outline")
+
+
 if __name__ == "__main__":
     what = sys.argv[1]
     if what == "agree":
         agree(sys.argv[2] if len(sys.argv) > 2 else str(R / "rig.json"))
     elif what == "only":
         only(sys.argv[2], sys.argv[3])
+    elif what == "clicks":
+        clicks(sys.argv[2])
     elif what == "lopo":
         lopo(sys.argv[2], [float(k) for k in sys.argv[3].split(",")], dict(a.split("=") for a in sys.argv[4:]))
     else:
