@@ -198,3 +198,17 @@ def test_depth_zero_is_no_measurement():
     assert np.all(out[:, 0] == BACKGROUND_RGB)
     lut = display.colormap_lut("viridis")
     assert np.array_equal(out[0, 1], lut[0]) and np.array_equal(out[0, -1], lut[255])  # 10 -> first, 1000 -> last
+
+
+@pytest.mark.parametrize("finite_share", [0.1, 0.9])
+def test_finite_rows_is_numpys_all_finite(finite_share):
+    # the shortcut (first band, then the other bands of candidate rows, or all rows when most are
+    # candidates) against the definition, with a non-finite value in any band
+    rng = np.random.default_rng(7)
+    a = rng.normal(size=(5000, 37)).astype(np.float32)
+    a[rng.uniform(size=5000) > finite_share, 0] = np.nan
+    a[rng.integers(0, 5000, 300), rng.integers(1, 37, 300)] = rng.choice([np.nan, np.inf, -np.inf], 300)
+    truth = np.isfinite(a).all(axis=1)
+    assert np.array_equal(display.finite_rows(a), truth)
+    assert np.array_equal(display.finite_rows(a[:, :1]), np.isfinite(a[:, 0]))
+    assert display.finite_rows(np.ones((4, 3), np.uint8)).all()

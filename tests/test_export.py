@@ -279,6 +279,43 @@ def test_failure_mid_write_leaves_nothing(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
+def test_registered_tiffs_written_in_the_background_fail_and_finish_cleanly(tmp_path, monkeypatch):
+    """The registered TIFFs are encoded in a background thread: a failure there (disk full) is
+    raised and leaves nothing; a failure here while a TIFF is still being written waits for it,
+    so that no file appears in (or re-creates) the removed folder afterwards."""
+    import threading
+    import time
+
+    rig, res = _result()
+    real = export.write_tiff_tiled
+
+    def full(path, *a, **k):
+        if "hs" in Path(path).name:
+            raise OSError(28, "No space left on device", str(path))
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(export, "write_tiff_tiled", full)
+    out = tmp_path / "out"
+    with pytest.raises(OSError) as e:
+        write_outputs(res, rig, None, out)
+    assert e.value.errno == 28 and not out.exists() and list(tmp_path.iterdir()) == []
+
+    def slow(path, *a, **k):
+        time.sleep(0.3)
+        return real(path, *a, **k)
+
+    def broken(*a, **k):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(export, "write_tiff_tiled", slow)
+    monkeypatch.setattr(export, "write_ply", broken)
+    with pytest.raises(OSError):
+        write_outputs(res, rig, None, out)
+    assert not any(t.name.startswith("plantreg-write") for t in threading.enumerate())
+    time.sleep(0.5)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_progress_reaches_one_and_is_monotonic(tmp_path):
     rig, res = _result()
     fr = []

@@ -79,9 +79,10 @@ def test_refine_from_a_disturbed_rig_registers_an_unseen_plant(plants):
     # landmarks only check the result (the objective does not use them): one recording's worth
     lms = [true_landmarks(gts[TRAIN_SEEDS[0]], sources)] + [[]] * (len(TRAIN_SEEDS) - 1)
     res = refine_rig(start, [recs[s] for s in TRAIN_SEEDS], free=frozenset({"focal"}), landmarks=lms)
-    # the issue's "< 60 s on 2 cores" is for an idle machine (benchmarks/bench_refine.py); here only a
-    # gross bound on CPU time (not wall time: the test machine is shared), 5x the target
-    assert res.report["cpu_seconds"] < 300, res.report["cpu_seconds"]
+    # the issue's "< 60 s on 2 cores": CPU time of all threads, measured 43-47 s at load 10-15
+    # (benchmarks/bench_refine.py, docs/refine.md). Wall time is not asserted (the test machine is
+    # shared); CPU time grows under contention too, hence a 2.5x tolerance on the target
+    assert res.report["cpu_seconds"] < 150, res.report["cpu_seconds"]
 
     after = registration_errors(res.rig, recs[TEST_SEED], gts[TEST_SEED], truth)
     figures = {s: (float(np.median(e)), float(np.percentile(e, 90))) for s, e in after.items()}
@@ -207,3 +208,34 @@ def test_fit_rig_refine_from_the_images_alone(tmp_path, plants, capsys):
     rec = Recording.load(tmp_path / "recordings" / f"plant{seeds[0]}", rig)
     errors = registration_errors(rig, rec, gts[seeds[0]], truth)
     assert all(np.median(e) <= 1.0 for e in errors.values()), {k: np.median(e) for k, e in errors.items()}
+
+
+def test_cameras_on_threads_give_the_same_rig_and_cancel_stops_them(plants):
+    """``RefineParams.workers``: the cameras refined concurrently give exactly the result of one
+    after the other (they share only read-only data), and a cancelled token stops the job."""
+    from plantreg_gui.core.errors import Cancelled
+    from plantreg_gui.core.progress import CancelToken, Reporter
+
+    truth, recs, _gts = plants
+    start = perturb_rig(truth, np.random.default_rng(6), rotation_deg=1.0, position_m=0.01, focal_rel=0.0)
+    rec = [recs[TRAIN_SEEDS[0]]]
+    out = {}
+    for workers in (1, 2):
+        p = RefineParams(levels_deg=(0.4, 0.0), max_points=3000, workers=workers)
+        out[workers] = refine_rig(start, rec, cameras=["thermal", "hyperspectral"], params=p)
+    for name in ("thermal", "hyperspectral"):
+        a, b = out[1].rig.camera(name), out[2].rig.camera(name)
+        assert np.array_equal(a.R_cam_rig, b.R_cam_rig) and np.array_equal(a.t_cam_rig, b.t_cam_rig), name
+        assert out[1].report["cameras"][name]["iterations"] == out[2].report["cameras"][name]["iterations"]
+    seen = []
+    token = CancelToken()
+
+    def cb(f, msg):
+        seen.append(f)
+        if len(seen) > 5:
+            token.cancel()
+
+    with pytest.raises(Cancelled):
+        refine_rig(start, rec, cameras=["thermal", "hyperspectral"], progress=Reporter(cb, token),
+                   params=RefineParams(levels_deg=(0.4, 0.0), max_points=3000, workers=2))
+    assert seen == sorted(seen) and 0.0 <= seen[0] and seen[-1] <= 1.0  # one progress value, never backwards

@@ -128,10 +128,17 @@ def run(args: argparse.Namespace) -> int:
     # input, writable), then the recording (names, then every image's header and size)
     check_output_spares_inputs(out, [rig_path, args.recording])
     check_output_location(out, "output", folder=True, overwrite=args.overwrite, inputs=[rig_path, args.recording])
-    recording = Recording.load(args.recording, rig)
+    from ..core.o3d_core import load_in_background
 
+    # overlaps with reading the images and the first, numpy-only steps of the registration (its
+    # first open3d_core() call waits for the load); joined always, so no error exits mid-load
+    loading = load_in_background()
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
-    result = Registrar(rig, recording, params).register(args.target, progress.sub(0.0, 0.85))
+    try:
+        recording = Recording.load(args.recording, rig)
+        result = Registrar(rig, recording, params).register(args.target, progress.sub(0.0, 0.85))
+    finally:
+        loading.join()
     if args.drop_mixed:
         drop_mixed(result)
     write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0), what=what,

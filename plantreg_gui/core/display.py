@@ -149,6 +149,41 @@ def colorize(img: np.ndarray, cmap: str = "gray", limits: tuple[float, float] | 
 
 
 # ---------------------------------------------------------------------- multi-band
+def _one_blas_thread():
+    """A context in which BLAS/LAPACK run in one thread. Why: the PCA's products are small
+    (a ~5000 x B covariance, a B x B eigen-decomposition); OpenBLAS's threads mostly spin
+    waiting for each other there -- 0.35-0.8 s of CPU for a 204-band preview with 2 threads on
+    a busy 2-core machine, 0.1 s with one."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - a dependency; without it, BLAS's own threads
+        from contextlib import nullcontext
+
+        return nullcontext()
+    return threadpool_limits(1, user_api="blas")
+
+
+def finite_rows(flat: np.ndarray) -> np.ndarray:
+    """``np.isfinite(flat).all(axis=1)`` for (N, C) ``flat``, (N,) bool -- checking all bands only
+    of the rows whose first band is finite: a registered cube is NaN off the object (~85 % of its
+    rows), and the full check of a 204-band cube is a pass over all its values."""
+    if flat.dtype.kind != "f":
+        return np.ones(len(flat), bool)
+    ok = np.isfinite(flat[:, 0])
+    if flat.shape[1] == 1:
+        return ok
+    cand = np.flatnonzero(ok)
+    step = max(1, (16 << 20) // (4 * flat.shape[1]))  # ~16 MB of values per chunk, never a copy of the cube
+    if len(cand) > len(flat) // 2:  # mostly finite (e.g. hit values): plain row ranges
+        for a in range(0, len(flat), step):
+            ok[a : a + step] = np.isfinite(flat[a : a + step]).all(axis=1)
+    else:
+        for a in range(0, len(cand), step):
+            c = cand[a : a + step]
+            ok[c] = np.isfinite(flat[c, 1:]).all(axis=1)
+    return ok
+
+
 def pca_scores(cube: np.ndarray, mask: np.ndarray | None = None, n: int = 3) -> np.ndarray:
     """First ``n`` principal-component scores of a cube (H, W, B) -> (H, W, n) float32.
 
@@ -156,10 +191,15 @@ def pca_scores(cube: np.ndarray, mask: np.ndarray | None = None, n: int = 3) -> 
     sign of each component is fixed so that its largest loading is positive (a stable picture
     for the same data). Pixels with any non-finite band get NaN scores.
     """
+    with _one_blas_thread():
+        return _pca_scores(cube, mask, n)
+
+
+def _pca_scores(cube: np.ndarray, mask: np.ndarray | None, n: int) -> np.ndarray:
     cube = np.asarray(cube)
     H, W, B = cube.shape
     flat = cube.reshape(-1, B)
-    finite = np.isfinite(flat).all(axis=1) if cube.dtype.kind == "f" else np.ones(H * W, bool)
+    finite = finite_rows(flat)
     fit = finite if mask is None else finite & np.asarray(mask, dtype=bool).ravel()
     idx = np.flatnonzero(fit)
     out = np.full((H * W, n), np.nan, np.float32)
@@ -176,12 +216,15 @@ def pca_scores(cube: np.ndarray, mask: np.ndarray | None = None, n: int = 3) -> 
     signs = np.sign(V[np.argmax(np.abs(V), axis=0), np.arange(V.shape[1])])
     V = V * np.where(signs == 0, 1.0, signs)
     k = V.shape[1]
-    # one BLAS matmul over all pixels (NaN rows give NaN scores, as wanted); subtracting the
-    # projected mean afterwards avoids a centred copy of the whole cube
+    # one BLAS matmul over the finite pixels (the others stay NaN); subtracting the projected
+    # mean afterwards avoids a centred copy of the whole cube
     Vf = np.ascontiguousarray(V.astype(np.float32))
-    flat32 = flat if flat.dtype == np.float32 else flat.astype(np.float32)
-    out[:, :k] = flat32 @ Vf - (mean.astype(np.float32) @ Vf)
-    out[~finite] = np.nan
+    rows = np.flatnonzero(finite)
+    proj_mean = mean.astype(np.float32) @ Vf
+    for a in range(0, len(rows), 1 << 16):  # chunks: no copy of all finite rows (0.8 GB at 4K)
+        sub = flat[rows[a : a + (1 << 16)]]
+        sub32 = sub if sub.dtype == np.float32 else sub.astype(np.float32)
+        out[rows[a : a + (1 << 16)], :k] = sub32 @ Vf - proj_mean
     if k < n:
         out[finite, k:] = 0.0
     return out.reshape(H, W, n)
@@ -205,7 +248,7 @@ class PcaBasis:
         V = self.components.astype(np.float32)
         out = flat32 @ V - (self.mean.astype(np.float32) @ V)
         if flat.dtype.kind == "f":
-            out[~np.isfinite(flat).all(axis=1)] = np.nan
+            out[~finite_rows(flat)] = np.nan
         return out.reshape(H, W, V.shape[1])
 
 
@@ -216,7 +259,7 @@ def fit_pca(cube: np.ndarray, mask: np.ndarray | None = None,
     cube = np.asarray(cube)
     B = cube.shape[2]
     flat = cube.reshape(-1, B)
-    finite = np.isfinite(flat).all(axis=1) if cube.dtype.kind == "f" else np.ones(len(flat), bool)
+    finite = finite_rows(flat)
     fit = finite if mask is None else finite & np.asarray(mask, dtype=bool).ravel()
     idx = np.flatnonzero(fit)
     if idx.size < 2:

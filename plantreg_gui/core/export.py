@@ -143,20 +143,18 @@ def write_outputs(
     if recording is not None and recording.folder is not None:
         keep += [Path(recording.folder), *map(Path, recording.paths.values())]
     check_output_spares_inputs(out, keep)
-    with atomic_output_dir(out, overwrite) as tmp:
+    with atomic_output_dir(out, overwrite) as tmp, _Background() as background:
         done = 0.0
         for step, weight in steps:
             kind, _, cam = step.partition(":")
             rep(done / total, f"writing {_step_label(kind, cam)}")
             t0 = time.perf_counter()
             if kind == "registered":
+                # encoded in a background thread while the previews, the point cloud and the rest
+                # are made here (the codecs release the GIL); waited for before the summary
                 rel = f"registered/{_safe(cam)}.tif"
-                reg = result.registered[cam]  # tiled, compressed, empty tiles encoded once
-                if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
-                    write_tiff_tiled(tmp / rel, reg.shape, np.float32, reg.block, codec=tiff_codec)
-                else:
-                    reg = np.asarray(reg, dtype=np.float32)
-                    write_tiff_tiled(tmp / rel, reg.shape, np.float32, dense_tiles(reg), codec=tiff_codec)
+                timings.setdefault(kind, 0.0)
+                background.submit(_write_registered, tmp / rel, result.registered[cam], tiff_codec)
             elif kind == "previews":
                 rel = f"registered/{_safe(cam)}.png"
                 write_png(tmp / rel, preview(cam))
@@ -181,6 +179,9 @@ def write_outputs(
             timings[kind] = timings.get(kind, 0.0) + time.perf_counter() - t0
             written.append(rel)
             done += weight
+        if background.pending():
+            rep(done / total, "writing registered images")
+            timings["registered"] = timings.get("registered", 0.0) + background.wait()
         if "summary" in sel:
             rep(done / total, "writing summary.json")
             timings["total"] = time.perf_counter() - t_start
@@ -191,6 +192,44 @@ def write_outputs(
     if not rep.cancel.cancelled:  # the folder is complete now: a late cancel changes nothing
         rep(1.0, f"wrote {out}")
     return out
+
+
+def _write_registered(path: Path, reg: Any, codec: str) -> float:
+    """One ``registered/<camera>.tif`` (tiled, compressed, empty tiles encoded once); seconds taken."""
+    t0 = time.perf_counter()
+    if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
+        write_tiff_tiled(path, reg.shape, np.float32, reg.block, codec=codec)
+    else:
+        reg = np.asarray(reg, dtype=np.float32)
+        write_tiff_tiled(path, reg.shape, np.float32, dense_tiles(reg), codec=codec)
+    return time.perf_counter() - t0
+
+
+class _Background:
+    """One background thread for output files, as a context: leaving it (also by an exception
+    or a cancel) cancels what has not started and waits for what runs, so that no file is
+    written into a folder that is being removed."""
+
+    def __enter__(self) -> "_Background":
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="plantreg-write")
+        self._futures: list = []
+        return self
+
+    def submit(self, fn, *args) -> None:
+        self._futures.append(self._pool.submit(fn, *args))
+
+    def pending(self) -> bool:
+        return bool(self._futures)
+
+    def wait(self) -> float:
+        """Wait for every submitted call (in order; the first error is raised); sum of their results."""
+        futures, self._futures = self._futures, []
+        return float(sum(f.result() for f in futures))
+
+    def __exit__(self, *exc) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
 
 
 def check_output_spares_inputs(out: str | Path, inputs: Iterable[str | Path]) -> None:
@@ -386,7 +425,7 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
             n_mapped = int(np.isfinite(reg.values).all(axis=1).sum())
         else:
             reg = np.asarray(reg)
-            n_mapped = int((np.isfinite(reg).all(axis=2) if reg.ndim == 3 else np.isfinite(reg)).sum())
+            n_mapped = int(np.count_nonzero(display.finite_rows(reg.reshape(reg.shape[0] * reg.shape[1], -1))))
         c = _rig_camera(rig, cam)
         cameras[cam] = {
             "modality": c.modality if c is not None else None,

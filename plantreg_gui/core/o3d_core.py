@@ -73,3 +73,21 @@ def _load_extension() -> ModuleType | None:
                 return None
             return mod
     return None
+
+
+def load_in_background() -> threading.Thread:
+    """Start loading the compiled core in a thread and return it (join it before exiting).
+
+    Why: loading it takes ~0.5 s with the GIL held; started before the recording is read, it
+    overlaps with the image decoding (OpenCV and numpy release the GIL). A failure is left to the
+    first real call of :func:`open3d_core`, which reports it where it matters.
+    """
+    def load() -> None:
+        try:
+            open3d_core()
+        except Exception:  # noqa: BLE001 - reported by the caller's own open3d_core() call
+            pass
+
+    t = threading.Thread(target=load, name="open3d-load", daemon=True)
+    t.start()
+    return t
