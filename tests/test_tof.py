@@ -235,10 +235,10 @@ def test_without_the_clean_up_the_problem_shows(realistic, realistic_ir):
     assert worse >= 2
 
 
-def test_mean_leaf_temperature_without_mixed_pixels(seeded):
+def _true_temperature_in_ir(rig, scene) -> np.ndarray:
+    """The true surface temperature seen by each infrared pixel (NaN off the scene), (H, W)."""
     from plantreg_gui.core.synthetic.textures import Appearance
 
-    seed, (rig, scene, _rec, gt), res = seeded
     cam = rig.camera("ir")
     o, d = cam.rays_rig()
     _t, prim, bary = scene.cast(o, d)
@@ -246,7 +246,12 @@ def test_mean_leaf_temperature_without_mixed_pixels(seeded):
     s = scene.surface(prim[hit], bary[hit])
     T = np.full(len(d), np.nan)
     T[hit] = Appearance(scene).temperature(s["points"], s["material"], s["uv"])
-    T = T.reshape(cam.shape)
+    return T.reshape(cam.shape)
+
+
+def test_mean_leaf_temperature_without_mixed_pixels(seeded):
+    seed, (rig, scene, _rec, gt), res = seeded
+    T = _true_temperature_in_ir(rig, scene)
     leaf = gt.material >= MAT_LEAF0  # a perfect leaf segmentation of the target
     reg = res.registered["thermal"]
     p1 = (res.cases["thermal"] == CASE_P1) & leaf
@@ -293,17 +298,9 @@ def test_mixed_flag_covers_a_known_calibration_error(realistic):
     import dataclasses
 
     from plantreg_gui.core.rig import Rig
-    from plantreg_gui.core.synthetic.textures import Appearance
 
     rig, scene, rec, gt = realistic  # the thermal image rendered with the true pose
-    cam = rig.camera("ir")
-    o, d = cam.rays_rig()
-    _t, prim, bary = scene.cast(o, d)
-    hit = prim >= 0
-    s = scene.surface(prim[hit], bary[hit])
-    T = np.full(len(d), np.nan)
-    T[hit] = Appearance(scene).temperature(s["points"], s["material"], s["uv"])
-    T = T.reshape(cam.shape)
+    T = _true_temperature_in_ir(rig, scene)
     leaf = gt.material >= MAT_LEAF0
     th = rig.camera("thermal")
     a = 3.0 / th.K[0, 0]  # 3 px sideways

@@ -30,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "(3D: depth mesh + ray casting) and write registered images, case maps, a point cloud "
         "and a summary into OUT.",
     )
-    from . import finite_float, nonempty_path
+    from . import nonempty_path
 
     p.add_argument("--rig", required=True, type=nonempty_path, metavar="RIG", help="rig file (plantreg.rig JSON)")
     p.add_argument("--recording", required=True, type=nonempty_path, metavar="DIR",
