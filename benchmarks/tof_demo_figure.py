@@ -35,7 +35,7 @@ def main() -> None:
     raw = rec.depth_m(rig.depth_scale)
     clean, fly = filter_depth(raw, RegistrationParams())
     res = register(rig, rec, "ir")
-    off = register(rig, rec, "ir", RegistrationParams(flying_filter=False, denoise=False))
+    off = register(rig, rec, "ir", RegistrationParams(flying_filter=False, denoise=False, fill_holes=False))
 
     cam = rig.depth()
     rays = cam.rays_cam(cam.pixel_grid())

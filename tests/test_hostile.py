@@ -734,14 +734,22 @@ def test_signal_while_writing_leaves_nothing(tmp_path, sig):
     """SIGTERM (``timeout``), SIGHUP (a closed terminal) and SIGINT while the demo is being written:
     exit 128 + signal (130 for Ctrl-C), no DIR, no .part/.old beside it."""
     out = tmp_path / "demo"
-    p = subprocess.Popen(_demo_argv(out), env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    t0 = time.monotonic()
-    while not list(tmp_path.glob(".demo.*.part")) and p.poll() is None and time.monotonic() - t0 < 120:
+    for attempt in range(3):
+        p = subprocess.Popen(_demo_argv(out), env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        t0 = time.monotonic()
+        while not list(tmp_path.glob(".demo.*.part")) and p.poll() is None and time.monotonic() - t0 < 120:
+            time.sleep(0.02)
+        assert p.poll() is None, "the demo ended before a signal could be sent"
         time.sleep(0.05)
-    assert p.poll() is None, "the demo ended before a signal could be sent"
-    time.sleep(0.3)
-    p.send_signal(sig)
-    _out, err = p.communicate(timeout=120)
+        p.send_signal(sig)
+        _out, err = p.communicate(timeout=120)
+        if p.returncode == 0 and attempt < 2:
+            # the demo finished between the check and the signal (a loaded machine): a lost race,
+            # not a defect -- the complete output must then be there; try again
+            assert out.is_dir() and not list(tmp_path.glob(".demo.*"))
+            shutil.rmtree(out)
+            continue
+        break
     assert p.returncode == 128 + sig, (p.returncode, err)
     assert "Traceback" not in err
     assert list(tmp_path.iterdir()) == []

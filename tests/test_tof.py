@@ -1,7 +1,9 @@
 """Time-of-flight depth artefacts: flying pixels, denoising, the mixed-pixel flag, the realistic demo.
 
 Ground truth comes from the synthetic generator (true mesh, exact visibility). The method's
-thresholds were developed on scene seed 5; the figures here are asserted on seed 0.
+thresholds were developed on scene seed 5, hole filling on seeds 1 and 5; the issue's figures are
+asserted on seeds 0, 1, 3 and 4 (0, 3 and 4 were not looked at while developing; 1 is where the
+occlusion recall fell short before hole filling).
 """
 
 import json
@@ -9,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from plantreg_gui.core.depthfilter import clean_depth, denoise_depth, flying_pixels, snap_flying
+from plantreg_gui.core.depthfilter import clean_depth, denoise_depth, fill_holes, flying_pixels, snap_flying
 from plantreg_gui.core.recording import Recording
 from plantreg_gui.core.register import CASE_P1, CASE_P2, CASE_P32, RegistrationParams, register
 from plantreg_gui.core.synthetic import (
@@ -17,6 +19,7 @@ from plantreg_gui.core.synthetic import (
 )
 
 SEED = 0
+SEEDS = (0, 1, 3, 4)
 
 
 def _noise(rng, z, sa=0.001, sr=0.001):
@@ -91,21 +94,87 @@ def test_clean_depth_switches():
     assert fly.any() and np.isnan(out[fly]).all() and np.isfinite(out[~fly]).all()
 
 
+def test_fill_holes_inside_a_surface_never_across_an_edge():
+    rng = np.random.default_rng(5)
+    v, u = np.mgrid[0:80, 0:100].astype(np.float64)
+    truth = 0.9 + 0.004 * u - 0.002 * v  # a steep leaf (4 mm per pixel)
+    truth[30:50, 60:] += 0.15  # a lower surface 15 cm behind, to the right
+    z = _noise(rng, truth).astype(np.float32)
+    holes = rng.random(z.shape) < 0.08
+    holes[10:12, 10:12] = True  # a 2 x 2 hole
+    holes[30:50, 59:61] = True  # a hole band along the depth edge (column 59 leaf, 60 the surface behind)
+    z[holes] = np.nan
+    out, filled = fill_holes(z)
+    assert not filled[~holes].any() and np.array_equal(out[~holes], z[~holes])
+    inner = holes.copy()
+    inner[28:52, 57:63] = False
+    assert filled[inner].mean() >= 0.97  # every hole with measured same-surface neighbours around it
+    # the corner pixels of the recess (30, 60) and (49, 60) lie on the leaf's diagonals and take the
+    # leaf's depth (documented); everywhere else a filled depth is its own surface's
+    ok = np.ones_like(filled)
+    ok[29:32, 59:62] = ok[48:51, 59:62] = False
+    assert np.all(np.abs(out[filled & ok] - truth[filled & ok]) <= 4 * (0.001 + 0.001 * 1.2))
+    assert not filled[31:49, 60].any()  # never bridged to the surface behind
+    z[:] = np.nan
+    z[40, 50] = 0.9
+    assert not fill_holes(z)[1].any()  # one pixel alone fills nothing
+
+
+def test_clean_depth_fills_holes_but_keeps_removed_flying_pixels_removed():
+    z, _f = _step_scene(np.random.default_rng(6))
+    z[10, 10] = z[20, 60] = 0  # holes inside the two surfaces
+    out, fly = clean_depth(z, repair=False)
+    assert np.isfinite(out[10, 10]) and np.isfinite(out[20, 60])
+    assert np.isnan(out[fly]).all()
+    out, fly = clean_depth(z, fill=False)
+    assert np.isnan(out[10, 10]) and np.isnan(out[20, 60])
+
+
 # ---------------------------------------------------------------------------- the realistic scene
-@pytest.fixture(scope="module")
-def realistic():
-    """Seed 0 with footprint-mixing flying pixels, holes, 1 mm + 0.1 % noise and a blurred thermal camera."""
+def _realistic(seed):
+    """Scene ``seed`` with footprint-mixing flying pixels, holes, 1 mm + 0.1 % noise (the depth of
+    ``render_recording(..., tof=True)``) and a thermal camera blurred with sigma 1 px. Only the
+    thermal image is rendered: the figures need no other image."""
+    from plantreg_gui.core.progress import ensure_reporter
+    from plantreg_gui.core.synthetic.render import _render_camera, render_tof_depth
+    from plantreg_gui.core.synthetic.textures import Appearance
+
     rig = demo_rig(thermal_blur_px=1.0)
-    scene = make_plant_scene(SEED)
-    rec = render_recording(rig, scene, (0.001, 0.001), seed=SEED, tof=True)
+    scene = make_plant_scene(seed)
+    depth = render_tof_depth(rig, scene, (0.001, 0.001), np.random.default_rng([seed, 0]))
+    i = [c.name for c in rig.cameras].index("thermal")
+    thermal = _render_camera(rig.camera("thermal"), scene, Appearance(scene), None,
+                             np.random.default_rng([seed, 2, i]), ensure_reporter(None))
+    rec = Recording(None, depth, {"thermal": thermal})
     gt = ground_truth(rig, scene, "ir")
     return rig, scene, rec, gt
+
+
+@pytest.fixture(scope="module", params=SEEDS, ids=[f"seed{s}" for s in SEEDS])
+def seeded(request):
+    rig, scene, rec, gt = _realistic(request.param)
+    return request.param, (rig, scene, rec, gt), register(rig, rec, "ir")
+
+
+@pytest.fixture(scope="module")
+def realistic():
+    return _realistic(SEED)
 
 
 @pytest.fixture(scope="module")
 def realistic_ir(realistic):
     rig, _scene, rec, _gt = realistic
     return register(rig, rec, "ir")
+
+
+def test_the_realistic_depth_is_the_demos(realistic):
+    """The figures' depth is exactly what ``render_recording(..., tof=True)`` (``plantreg demo``) renders."""
+    from plantreg_gui.core.rig import Rig
+
+    rig, scene, rec, _gt = realistic
+    small = Rig([rig.camera("ir")], rig.depth_camera, rig.depth_scale, rig.roi_min, rig.roi_max)
+    demo = render_recording(small, scene, (0.001, 0.001), seed=SEED, tof=True)
+    assert np.array_equal(demo.depth, rec.depth)
 
 
 def _figures(rig, res, gt, src):
@@ -127,22 +196,27 @@ def test_realistic_depth_has_the_artefacts(realistic):
     assert rig.camera("thermal").extra["blur_px"] == 1.0
 
 
-def test_realistic_scene_meets_the_issue_figures(realistic, realistic_ir):
-    rig, scene, rec, gt = realistic
-    res = realistic_ir
+def test_realistic_scene_meets_the_issue_figures(seeded):
+    seed, (rig, scene, rec, gt), res = seeded
     assert res.flying is not None and res.flying.shape == rig.depth().shape
     assert res.stats["flying_pixels"] == int(res.flying.sum()) > 1000
+    assert res.stats["filled_pixels"] > 0
     # the same scene with clean depth, the same noise and the same holes: flying pixels must cost
     # (almost) nothing
-    noisy = render_depth(rig, scene, (0.001, 0.001), np.random.default_rng([SEED, 0]))
+    noisy = render_depth(rig, scene, (0.001, 0.001), np.random.default_rng([seed, 0]))
     noisy[rec.depth == 0] = 0
-    ref = register(rig, Recording(None, noisy, rec.images), "ir")
+    ref = register(rig, Recording(None, noisy, {}), "ir")
+    # exact depth, no artefacts: what the method reaches at best (its P3.2 caution, section 7)
+    ideal = register(rig, Recording(None, render_depth(rig, scene), {}), "ir")
     for src in res.cases:
         f = _figures(rig, res, gt, src)
         r = _figures(rig, ref, gt, src)
-        msg = f"{src}: {f} (clean depth, same noise: {r})"
+        i = _figures(rig, ideal, gt, src)
+        msg = f"seed {seed} {src}: {f} (clean depth, same noise: {r}; exact depth: {i})"
+        assert f["n_occluded"] > 1000, msg
         assert f["median"] <= 0.2 and f["p90"] <= 0.6, msg
-        assert f["p1_coverage"] >= 0.95, msg
+        # >= 95 % where exact depth reaches it; else no more than a point below exact depth
+        assert f["p1_coverage"] >= min(0.95, i["p1_coverage"] - 0.01), msg
         assert f["p1_visible"] >= 0.997, msg
         assert f["occluded_p2_p32"] >= 0.90, msg
         assert f["occluded_p2_p32"] >= r["occluded_p2_p32"] - 0.02, msg
@@ -151,8 +225,8 @@ def test_realistic_scene_meets_the_issue_figures(realistic, realistic_ir):
 
 def test_without_the_clean_up_the_problem_shows(realistic, realistic_ir):
     rig, _scene, rec, gt = realistic
-    off = register(rig, rec, "ir", RegistrationParams(flying_filter=False, denoise=False))
-    assert off.stats["flying_pixels"] == 0 and not off.flying.any()
+    off = register(rig, rec, "ir", RegistrationParams(flying_filter=False, denoise=False, fill_holes=False))
+    assert off.stats["flying_pixels"] == 0 and not off.flying.any() and off.stats["filled_pixels"] == 0
     worse = 0
     for src in off.cases:
         f_off, f_on = _figures(rig, off, gt, src), _figures(rig, realistic_ir, gt, src)
@@ -161,11 +235,10 @@ def test_without_the_clean_up_the_problem_shows(realistic, realistic_ir):
     assert worse >= 2
 
 
-def test_mean_leaf_temperature_without_mixed_pixels(realistic, realistic_ir):
+def _true_temperature_in_ir(rig, scene) -> np.ndarray:
+    """The true surface temperature seen by each infrared pixel (NaN off the scene), (H, W)."""
     from plantreg_gui.core.synthetic.textures import Appearance
 
-    rig, scene, _rec, gt = realistic
-    res = realistic_ir
     cam = rig.camera("ir")
     o, d = cam.rays_rig()
     _t, prim, bary = scene.cast(o, d)
@@ -173,7 +246,12 @@ def test_mean_leaf_temperature_without_mixed_pixels(realistic, realistic_ir):
     s = scene.surface(prim[hit], bary[hit])
     T = np.full(len(d), np.nan)
     T[hit] = Appearance(scene).temperature(s["points"], s["material"], s["uv"])
-    T = T.reshape(cam.shape)
+    return T.reshape(cam.shape)
+
+
+def test_mean_leaf_temperature_without_mixed_pixels(seeded):
+    seed, (rig, scene, _rec, gt), res = seeded
+    T = _true_temperature_in_ir(rig, scene)
     leaf = gt.material >= MAT_LEAF0  # a perfect leaf segmentation of the target
     reg = res.registered["thermal"]
     p1 = (res.cases["thermal"] == CASE_P1) & leaf
@@ -181,10 +259,10 @@ def test_mean_leaf_temperature_without_mixed_pixels(realistic, realistic_ir):
     assert mixed.dtype == bool and mixed.shape == reg.shape and not (mixed & (res.cases["thermal"] != CASE_P1)).any()
     sel = p1 & ~mixed
     assert sel.sum() >= 0.8 * p1.sum()
-    assert abs(np.mean(reg[sel]) - np.mean(T[sel])) <= 0.05
+    assert abs(np.mean(reg[sel]) - np.mean(T[sel])) <= 0.05, (seed, np.mean(reg[sel]) - np.mean(T[sel]))
     # the flagged pixels are the soil-contaminated rims: clearly warmer than their true leaf
     flagged = p1 & mixed
-    assert np.mean(reg[flagged]) - np.mean(T[flagged]) >= 0.2
+    assert np.mean(reg[flagged]) - np.mean(T[flagged]) >= 0.2, seed
     assert res.stats["mixed_pixels"]["thermal"] == int(mixed.sum())
 
 
@@ -196,6 +274,50 @@ def test_mixed_flag_radius_follows_the_camera_blur(realistic):
     assert mixed_radius(rig.camera("rgb"), 1.0) == pytest.approx(1.0)
 
 
+def test_mixed_flag_radius_includes_the_calibration_uncertainty():
+    import dataclasses
+
+    from plantreg_gui.core.mixed import calibration_residual_px, mixed_radius
+
+    rig = demo_rig(thermal_blur_px=1.0)
+    th = rig.camera("thermal")
+    cal = {"calibration": {"method": "landmarks", "per_camera": {"thermal": {"median_px": 2.5, "p90_px": 5.0}}}}
+    assert calibration_residual_px(cal, "thermal") == pytest.approx(2.5)
+    assert calibration_residual_px(cal, "rgb") == 0.0
+    assert calibration_residual_px({"calibration": {"method": "board", "per_camera": {"thermal": {"median_px": 2}}}},
+                                   "thermal") == 0.0  # only a landmark fit's residuals say how far off the mapping is
+    assert calibration_residual_px({}, "thermal") == 0.0
+    assert mixed_radius(th, 1.0, 2.5) == pytest.approx(5.5)
+    keyed = dataclasses.replace(th, extra={**th.extra, "registration_px": 0.5})
+    assert mixed_radius(keyed, 1.0, 2.5) == pytest.approx(3.5)  # the camera's own key wins
+
+
+def test_mixed_flag_covers_a_known_calibration_error(realistic):
+    """The thermal camera's pose off by 3 px (a rig fitted from a few landmarks): stating that
+    uncertainty (``registration_px`` 3) keeps the soil-mixed rims out of the unflagged leaf mean."""
+    import dataclasses
+
+    from plantreg_gui.core.rig import Rig
+
+    rig, scene, rec, gt = realistic  # the thermal image rendered with the true pose
+    T = _true_temperature_in_ir(rig, scene)
+    leaf = gt.material >= MAT_LEAF0
+    th = rig.camera("thermal")
+    a = 3.0 / th.K[0, 0]  # 3 px sideways
+    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]) @ th.R_cam_rig
+    err = {}
+    for reg_px in (0.0, 3.0):
+        off = dataclasses.replace(th, R_cam_rig=R, t_cam_rig=-R @ th.center_rig,
+                                  extra={**th.extra, "registration_px": reg_px})
+        rig_off = Rig([off if c.name == "thermal" else c for c in rig.cameras], rig.depth_camera, rig.depth_scale,
+                      rig.roi_min, rig.roi_max)
+        res = register(rig_off, rec, "ir")
+        assert res.stats["mixed_radius_px"]["thermal"] == pytest.approx(3.0 + reg_px)
+        sel = (res.cases["thermal"] == CASE_P1) & leaf & ~res.mixed["thermal"]
+        err[reg_px] = float(np.mean(res.registered["thermal"][sel]) - np.mean(T[sel]))
+    assert abs(err[3.0]) <= 0.01 and abs(err[3.0]) <= 0.5 * abs(err[0.0]), err  # measured +0.003 / +0.015
+
+
 def test_noise_free_registration_is_unchanged_or_better(realistic):
     """Clean (quantised) depth: the clean-up must not make anything worse."""
     rig, scene, rec, _gt = realistic
@@ -204,7 +326,7 @@ def test_noise_free_registration_is_unchanged_or_better(realistic):
     depth = render_depth(clean_rig, scene)
     recc = Recording(None, depth, rec.images)
     on = register(clean_rig, recc, "ir")
-    off = register(clean_rig, recc, "ir", RegistrationParams(flying_filter=False, denoise=False))
+    off = register(clean_rig, recc, "ir", RegistrationParams(flying_filter=False, denoise=False, fill_holes=False))
     for src in ("thermal", "rgb"):
         a, b = _figures(clean_rig, on, gt, src), _figures(clean_rig, off, gt, src)
         assert a["median"] <= b["median"] + 0.005 and a["p90"] <= b["p90"] + 0.01, (src, a, b)
@@ -239,6 +361,9 @@ def test_register_writes_edge_masks_flying_mask_and_counts(demo_dir, tmp_path):
     assert "flying pixels" in so and "mixed (% of P1)" in so
     s = json.loads((out / "summary.json").read_text())
     assert s["version"] == 2 and s["parameters"]["mixed_radius_px"] == 1.5
+    assert s["parameters"]["fill_holes"] is True and s["tof"]["filled_pixels"] >= 0
+    for cam in ("rgb", "thermal", "hyperspectral"):  # the clean demo: no blur_px, no landmark fit
+        assert s["tof"]["mixed"][cam]["radius_px"] == pytest.approx(1.5)
     assert s["parameters"]["flying_filter"] is True and s["parameters"]["denoise"] is True
     fly = read_image(out / "flying.png")
     assert fly.shape == (576, 640) and set(np.unique(fly)) <= {0, 255}
@@ -260,10 +385,11 @@ def test_register_tof_switches_and_drop_mixed(demo_dir, tmp_path):
     out = tmp_path / "out"
     code, so, se = _run(["register", "--rig", demo_dir / "rig.json", "--recording", demo_dir / "recording",
                          "--target", "ir", "--out", out, "--quiet", "--no-flying-filter", "--no-denoise",
-                         "--drop-mixed"])
+                         "--no-fill-holes", "--drop-mixed"])
     assert code == 0, se
     s = json.loads((out / "summary.json").read_text())
     assert s["parameters"]["flying_filter"] is False and s["parameters"]["denoise"] is False
+    assert s["parameters"]["fill_holes"] is False and s["tof"]["filled_pixels"] == 0
     assert s["tof"]["flying_pixels"] == 0 and s["tof"]["flying_handling"] == "off"
     assert "--no-flying-filter" in s["inputs"]["command"] and "--drop-mixed" in s["inputs"]["command"]
     edge = read_image(out / "cases/thermal_edge.png") == 255

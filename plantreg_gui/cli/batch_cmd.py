@@ -23,7 +23,7 @@ from ..core.errors import InputError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    from . import finite_float, nonempty_path
+    from . import nonempty_path
     from .register_cmd import add_output_options, add_registration_options
 
     p = sub.add_parser(
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     from .register_cmd import load_rig_for_target, registration_params
 
     rig_path = args.rig.absolute()
-    rig = load_rig_for_target(rig_path, args.target)
+    load_rig_for_target(rig_path, args.target)  # refuses a bad rig before any work
     what = parse_outputs(args.outputs)
     params = registration_params(args)
     if args.workers is not None and args.workers < 1:

@@ -20,7 +20,6 @@ import argparse
 import os
 import shlex
 import sys
-from pathlib import Path
 
 import numpy as np
 

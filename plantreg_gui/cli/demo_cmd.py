@@ -6,7 +6,6 @@ import argparse
 import os
 import sys
 import time
-from pathlib import Path
 
 from ..core.errors import InputError
 from . import StderrProgress

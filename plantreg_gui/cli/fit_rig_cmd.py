@@ -1,7 +1,7 @@
 """``plantreg fit-rig``: fit a rig's cameras to landmarks clicked in the recordings themselves.
 
     plantreg fit-rig --rig START --landmarks LANDMARKS.json --out RIG
-                     [--free focal,principal,k1] [--refine] [--recording DIR ...] [--overwrite] [--quiet]
+                     [--free focal,principal,k1] [--refine] [--silhouette] [--recording DIR ...] [--overwrite] [--quiet]
 
 Writes a normal rig file whose ``"calibration"`` entry records the method, the landmarks used,
 every residual and the leave-one-recording-out residuals, and prints the per-camera residual
@@ -36,8 +36,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "included) or CAMERA:ITEM for one camera, e.g. 'focal,ir:k1,ir:principal'")
     p.add_argument("--refine", action="store_true",
                    help="then refine the rig automatically from the images (see docs/fit-rig.md)")
+    p.add_argument("--silhouette", action="store_true",
+                   help="then fit every camera's pose to the plant outline in all recordings, with the landmarks "
+                        "as a term (core/silhouette.py; see docs/fit-rig.md)")
     p.add_argument("--recording", action="append", type=Path, default=[], metavar="DIR",
-                   help="more recordings for --refine (repeatable)")
+                   help="more recordings for --refine / --silhouette (repeatable)")
     p.add_argument("--worst", type=int, default=10, metavar="N", help="worst landmarks to list (default 10)")
     p.add_argument("--overwrite", action="store_true", help="replace RIG if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -60,8 +63,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("output path is a folder, not a file", out)
     if not out.absolute().parent.is_dir():
         raise InputError("the folder for the output rig does not exist", out.absolute().parent)
-    if args.recording and not args.refine:
-        raise InputError("--recording adds recordings for --refine; pass --refine too")
+    if args.recording and not (args.refine or args.silhouette):
+        raise InputError("--recording adds recordings for --refine or --silhouette; pass one of them too")
     free = parse_free(args.free)
     rig = Rig.load(args.rig)
     try:
@@ -73,12 +76,12 @@ def run(args: argparse.Namespace) -> int:
         result = fit_rig_from_file(rig, landmarks, free=free)
         fitted, report, warnings = result.rig, result.report, list(result.warnings)
         method = "landmarks"
-    elif args.refine:  # no points: refine from the images alone, starting from the start rig
+    elif args.refine or args.silhouette:  # no points: refine from the images alone, starting from the start rig
         landmarks.check_recordings()
-        fitted, report, warnings, method = rig, {"landmarks_used": 0}, [], "refine"
+        fitted, report, warnings, method = rig, {"landmarks_used": 0}, [], ("refine" if args.refine else "start")
     else:
-        raise InputError("the landmarks file has no points (add some, or pass --refine to refine from the "
-                         "images alone)", args.landmarks)
+        raise InputError("the landmarks file has no points (add some, or pass --refine or --silhouette to fit "
+                         "from the images alone)", args.landmarks)
     if args.refine:
         # the refinement is its own module (core/refine.py); imported only when asked for
         from ..core.recording import Recording
@@ -95,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
         fitted, method = rr.rig, ("landmarks+refine" if report.get("landmarks_used") else "refine")
         report["refine"] = rr.report
         warnings += list(rr.warnings)
+    if args.silhouette:
+        fitted, method = _silhouette(args, fitted, landmarks, report, method)
     previous = rig.extra.get("calibration")
     fitted.extra["calibration"] = {
         "method": method,
@@ -112,7 +117,40 @@ def run(args: argparse.Namespace) -> int:
         print(format_report(report, worst=args.worst))
     if "refine" in report:
         print("refinement: see \"calibration\".\"refine\" in the rig file")
+    if "silhouette" in report:
+        print(_silhouette_table(report["silhouette"]))
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
     print(f"wrote {out}")
     return 0
+
+
+def _silhouette(args: argparse.Namespace, fitted, landmarks, report: dict, method: str):
+    """--silhouette: outline fit over the landmark file's recordings and any --recording DIR."""
+    from .. import cli
+    from ..core.progress import Reporter
+    from ..core.recording import Recording
+    from ..core.silhouette import fit_rig_recordings
+
+    folders = [landmarks.folder(k).resolve() for k in landmarks.recordings]
+    folders += [f.resolve() for f in args.recording if f.resolve() not in folders]
+    recordings = [Recording.load(f, fitted) for f in folders]
+    by_folder = {str(landmarks.folder(k).resolve()): pts for k, pts in landmarks.recordings.items()}
+    progress = Reporter(cli.StderrProgress(quiet=args.quiet))
+    rig, srep = fit_rig_recordings(fitted, recordings, by_folder, progress=progress)
+    report["silhouette"] = srep
+    return rig, ("silhouette" if method == "start" else method + "+silhouette")
+
+
+def _silhouette_table(rep: dict) -> str:
+    import numpy as np
+
+    lines = ["silhouette fit:",
+             "  camera          recordings  outline median px  landmarks median px (before -> after)"]
+    for name, r in rep["cameras"].items():
+        med = [v["outline_median_px"] for v in r["views"].values() if "outline_median_px" in v]
+        b = [e for v in r["views"].values() for e in v.get("landmarks_px", [])]
+        a = [e for v in r["views"].values() for e in v.get("landmarks_px_after", [])]
+        lm = f"{np.median(b):.2f} -> {np.median(a):.2f} (n {len(a)})" if a else "-"
+        lines.append(f"  {name:<15} {len(r['views']):>10}  {np.median(med) if med else float('nan'):>17.2f}  {lm}")
+    return "\n".join(lines)

@@ -3,7 +3,7 @@
     plantreg register --rig RIG --recording DIR --target NAME --out OUT
                       [--edge-angle DEG] [--outputs PARTS] [--tiff-codec C] [--overwrite] [--quiet]
                       [--no-flying-filter | --remove-flying] [--flying-jump REL]
-                      [--no-denoise] [--denoise-size N] [--mixed-radius PX] [--drop-mixed]
+                      [--no-fill-holes] [--no-denoise] [--denoise-size N] [--mixed-radius PX] [--drop-mixed]
 
 Writes the output folder described in ``docs/outputs.md`` (see :mod:`plantreg_gui.core.export`)
 and prints, per source camera, the share of target pixels in each projection case.
@@ -30,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "(3D: depth mesh + ray casting) and write registered images, case maps, a point cloud "
         "and a summary into OUT.",
     )
-    from . import finite_float, nonempty_path
+    from . import nonempty_path
 
     p.add_argument("--rig", required=True, type=nonempty_path, metavar="RIG", help="rig file (plantreg.rig JSON)")
     p.add_argument("--recording", required=True, type=nonempty_path, metavar="DIR",
@@ -74,6 +74,9 @@ def add_registration_options(p: argparse.ArgumentParser) -> None:
                      help="remove flying pixels instead of moving them onto the surface they mostly saw")
     tof.add_argument("--flying-jump", type=finite_float, default=None, metavar="REL",
                      help="a depth jump between neighbours counts above REL x depth (default 0.01: 1 cm at 1 m)")
+    tof.add_argument("--no-fill-holes", action="store_true",
+                     help="leave holes in the depth (no measurement) as they are; by default a hole between "
+                          "two measured pixels of one surface is filled by interpolation")
     tof.add_argument("--no-denoise", action="store_true", help="no edge-preserving depth denoising")
     tof.add_argument("--denoise-size", type=int, default=None, metavar="N",
                      help="window of the same-surface plane fit, depth pixels, odd (default 3)")
@@ -159,7 +162,8 @@ def run(args: argparse.Namespace) -> int:
         ((AREA_P4, "P4"), (AREA_P5, "P5"), (AREA_P6, "P6"))))
     if result.flying is not None:
         how = "off" if not params.flying_filter else ("repaired" if params.flying_repair else "removed")
-        print(f"  depth: {int(np.count_nonzero(result.flying))} flying pixels ({how})"
+        print(f"  depth: {int(np.count_nonzero(result.flying))} flying pixels ({how}), "
+              f"{int(result.stats.get('filled_pixels', 0))} holes filled"
               + ("; mixed (% of P1): " + "  ".join(
                   f"{cam} {100.0 * np.count_nonzero(m) / max(1, np.count_nonzero(result.cases[cam] == 1)):.1f}%"
                   for cam, m in result.mixed.items()) if result.mixed else ""))
@@ -176,6 +180,8 @@ def _tof_params(args: argparse.Namespace, params) -> None:
         if not 0.0 < args.flying_jump < 1.0:
             raise InputError(f"--flying-jump must be between 0 and 1 (a fraction of the depth), got {args.flying_jump:g}")
         params.flying_jump_rel = float(args.flying_jump)
+    if args.no_fill_holes:
+        params.fill_holes = False
     if args.no_denoise:
         params.denoise = False
     if args.denoise_size is not None:

@@ -24,6 +24,21 @@ Pixels with no same-surface neighbour at all (isolated speckle) are flying too. 
 the Azure Kinect's 2 mm pixel pitch at 1 m) surfaces up to ~75 degrees steep are never taken
 for a jump, even with 1-2 mm noise.
 
+Hole filling (:func:`fill_holes`)
+---------------------------------
+A ToF pixel whose surface is steep to the line of sight returns too little light and reports
+nothing: holes on stem flanks, the pot's side and leaves seen edge-on. Meshed as they are,
+those holes cut gaps into thin occluders (a stem) through which a source camera "sees" what the
+stem hides, and a target pixel on a hole has no point at all. A hole pixel is filled when, along
+one of the four lines through it (row, column, both diagonals), the nearest measured pixels on
+*both* sides within ``reach`` pixels lie on one surface: ``|z_a - z_b| <= (i + j) * tol_rel *
+min(z_a, z_b)`` for neighbours ``i`` and ``j`` pixels away (the flying-pixel test's per-pixel
+jump, summed over the span). Its depth is the linear interpolation between them (the mean over
+the lines that qualify); the plane fit below then refines it from its same-surface neighbours.
+A hole at a silhouette is filled only along the silhouette (both sides on the surface), never
+across it: nothing says where the surface ends. One ambiguous case remains: the corner pixel of a
+recess (a gap between leaves) lies on a diagonal of the surrounding surface and takes its depth.
+
 Denoising (:func:`denoise_depth`)
 ---------------------------------
 Each pixel's depth is replaced by a least-squares plane fitted, in image coordinates, to the
@@ -171,6 +186,54 @@ def denoise_depth(depth_m: np.ndarray, tol_rel: float = 0.01, size: int = 3, min
     return out
 
 
+def fill_holes(depth_m: np.ndarray, tol_rel: float = 0.01, reach: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Holes (no measurement) between two measured pixels of one surface, filled by linear
+    interpolation; see the module docstring.
+
+    ``depth_m`` (H, W) metres, NaN or <= 0 = none. Returns the depth (H, W) float32 (NaN where
+    still none) and the mask (H, W) bool of filled pixels.
+    """
+    z = np.asarray(depth_m, dtype=np.float32)
+    with np.errstate(invalid="ignore"):
+        z = np.where(z > 0, z, np.float32(np.nan))
+    H, W = z.shape
+    hole = np.flatnonzero(np.isnan(z))
+    filled = np.zeros(z.shape, dtype=bool)
+    if len(hole) == 0:
+        return z, filled
+    r = max(1, int(reach))
+    # gathers at the holes only (a few hundred to a few ten thousand pixels), from a padded copy
+    Wp = W + 2 * r
+    zp = np.pad(z, r, mode="constant", constant_values=np.nan).reshape(-1)
+    row, col = np.divmod(hole, W)
+    centre = (row + r) * Wp + (col + r)
+    acc = np.zeros(len(hole), dtype=np.float32)
+    cnt = np.zeros(len(hole), dtype=np.int8)
+    for du, dv in ((1, 0), (0, 1), (1, 1), (1, -1)):
+        # nearest measured pixel on each side along the line, and how far away it is
+        za = np.full(len(hole), np.nan, dtype=np.float32)
+        zb = np.full(len(hole), np.nan, dtype=np.float32)
+        ia = np.zeros(len(hole), dtype=np.float32)
+        ib = np.zeros(len(hole), dtype=np.float32)
+        for i in range(r, 0, -1):
+            step = i * (dv * Wp + du)
+            a, b = zp[centre - step], zp[centre + step]
+            fa, fb = ~np.isnan(a), ~np.isnan(b)
+            za[fa], ia[fa] = a[fa], i
+            zb[fb], ib[fb] = b[fb], i
+        s = ia + ib
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ok = np.abs(za - zb) <= s * np.float32(tol_rel) * np.fmin(za, zb)  # NaN (a side missing): False
+            est = (ib * za + ia * zb) / s
+        acc[ok] += est[ok]
+        cnt[ok] += 1
+    got = cnt > 0
+    out = z.copy()
+    out.reshape(-1)[hole[got]] = acc[got] / cnt[got]
+    filled.reshape(-1)[hole[got]] = True
+    return out, filled
+
+
 def snap_flying(depth_m: np.ndarray, flying: np.ndarray) -> np.ndarray:
     """Depth (H, W) float32 with every flying pixel moved onto the surface it shares most of its
     footprint with; NaN where it cannot be decided.
@@ -204,11 +267,13 @@ def snap_flying(depth_m: np.ndarray, flying: np.ndarray) -> np.ndarray:
 
 def clean_depth(depth_m: np.ndarray, flying: bool = True, jump_rel: float = 0.01, denoise: bool = True,
                 denoise_size: int = 3, denoise_tol_rel: float = 0.01,
-                repair: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Flying-pixel detection, then denoising: returns the cleaned depth (H, W) float32 metres
-    (NaN where none) and the flying-pixel mask (H, W) bool. Flying pixels are moved onto the
-    surface they mostly saw (``repair``, :func:`snap_flying`) or removed; they never enter
-    another pixel's plane fit."""
+                repair: bool = True, fill: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Flying-pixel detection, hole filling, then denoising: returns the cleaned depth (H, W)
+    float32 metres (NaN where none) and the flying-pixel mask (H, W) bool. Flying pixels are
+    moved onto the surface they mostly saw (``repair``, :func:`snap_flying`) or removed; holes
+    inside a surface are filled (``fill``, :func:`fill_holes`; the filled pixels are those with
+    no measurement in ``depth_m`` and a depth in the result). Neither flying nor filled pixels
+    enter another pixel's plane fit."""
     z = np.asarray(depth_m, dtype=np.float32)
     with np.errstate(invalid="ignore"):
         valid = z > 0
@@ -216,5 +281,12 @@ def clean_depth(depth_m: np.ndarray, flying: bool = True, jump_rel: float = 0.01
     base = np.where(valid, z, np.float32(np.nan))
     if fly.any():
         base = snap_flying(base, fly) if repair else np.where(fly, np.float32(np.nan), base)
-    out = denoise_depth(base, denoise_tol_rel, denoise_size, exclude=fly) if denoise else base
+    exclude = fly
+    if fill:
+        got, filled = fill_holes(base, jump_rel)
+        if not repair:
+            filled &= ~fly  # asked to remove flying pixels: they stay removed
+        base = np.where(filled, got, base)
+        exclude = fly | filled
+    out = denoise_depth(base, denoise_tol_rel, denoise_size, exclude=exclude) if denoise else base
     return out, fly

@@ -356,7 +356,10 @@ def tof_summary(result: RegistrationResult) -> dict[str, Any]:
         n_p1 = int(np.count_nonzero(np.asarray(result.cases[cam]) == 1)) if cam in result.cases else 0
         n_m = int(np.count_nonzero(m))
         mixed[cam] = {"pixels": n_m, "percent_of_p1": round(100.0 * n_m / n_p1, 3) if n_p1 else 0.0}
+        if cam in result.stats.get("mixed_radius_px", {}):
+            mixed[cam]["radius_px"] = result.stats["mixed_radius_px"][cam]
     return {"flying_pixels": n_fly, "flying_percent_of_depth": round(100.0 * n_fly / n_depth, 4) if n_depth else 0.0,
+            "filled_pixels": int(result.stats.get("filled_pixels", 0)),
             "flying_handling": ("repaired" if getattr(result.params, "flying_repair", True) else "removed")
             if getattr(result.params, "flying_filter", False) else "off",
             "mixed": mixed}

@@ -47,7 +47,7 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Sequence
 
 import cv2
 import numpy as np
@@ -246,15 +246,7 @@ def _bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
     h, w = img.shape
     u = np.clip(uv[:, 0], 0, w - 1.0001)  # NaN stays NaN and would index garbage: callers pass finite uv
     v = np.clip(uv[:, 1], 0, h - 1.0001)
-    u0 = u.astype(np.int64)
-    v0 = v.astype(np.int64)
-    fu = (u - u0).astype(np.float32)
-    fv = (v - v0).astype(np.float32)
-    flat = img.ravel()
-    i = v0 * w + u0
-    top = flat[i] + fu * (flat[i + 1] - flat[i])
-    bot = flat[i + w] + fu * (flat[i + w + 1] - flat[i + w])
-    return top + fv * (bot - top)
+    return _bilinear_uv(img, u, v)
 
 
 def _bilinear_uv(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -69,6 +69,7 @@ class RegistrationParams:
     flying_filter: bool = True          # remove flying pixels (depth between two surfaces)
     flying_jump_rel: float = 0.01       # a depth jump counts above this fraction of the depth (1 cm at 1 m)
     flying_repair: bool = True          # move flying pixels onto the surface they mostly saw (False: remove)
+    fill_holes: bool = True             # fill holes between two measured pixels of one surface (steep flanks)
     denoise: bool = True                # edge-preserving same-surface plane fit
     denoise_size: int = 3               # window of the plane fit, depth pixels (odd; 5 = smoother, 3x slower)
     denoise_tol_rel: float = 0.01       # same surface: |dz| <= this fraction of the depth
@@ -245,6 +246,7 @@ class Meshes:
     object_scene: MeshScene
     uncertainty_scene: MeshScene
     flying: np.ndarray | None = None  # (H, W) bool depth pixels removed as flying
+    filled: np.ndarray | None = None  # (H, W) bool holes filled before meshing (depthfilter.fill_holes)
 
 
 def build_meshes(rig: Rig, depth_m: np.ndarray, params: RegistrationParams | None = None,
@@ -259,6 +261,8 @@ def build_meshes(rig: Rig, depth_m: np.ndarray, params: RegistrationParams | Non
     lo, hi = params.roi(rig)
     with _stage(progress, timings, "depth filter", 0.0, 0.1):
         depth_m, flying = filter_depth(depth_m, params)
+        with np.errstate(invalid="ignore"):
+            filled = ~(np.asarray(depth_raw) > 0) & np.isfinite(depth_m)
     with _stage(progress, timings, "mesh", 0.1, 0.7):
         obj = object_mesh(dcam, depth_m, lo, hi, params.edge_angle_deg, rays_cam)
         if flying.any() and obj.in_roi is not None:
@@ -269,7 +273,7 @@ def build_meshes(rig: Rig, depth_m: np.ndarray, params: RegistrationParams | Non
     with _stage(progress, timings, "uncertainty mesh", 0.7, 1.0):
         unc = uncertainty_mesh(obj, dcam.center_rig, float(hi[2]))
         unc_scene = MeshScene(unc.vertices, unc.triangles)
-    return Meshes(obj, unc, obj_scene, unc_scene, flying)
+    return Meshes(obj, unc, obj_scene, unc_scene, flying, filled)
 
 
 def filter_depth(depth_m: np.ndarray, params: RegistrationParams) -> tuple[np.ndarray, np.ndarray]:
@@ -278,7 +282,8 @@ def filter_depth(depth_m: np.ndarray, params: RegistrationParams) -> tuple[np.nd
     from .depthfilter import clean_depth
 
     return clean_depth(depth_m, params.flying_filter, params.flying_jump_rel, params.denoise,
-                       params.denoise_size, params.denoise_tol_rel, params.flying_repair)
+                       params.denoise_size, params.denoise_tol_rel, params.flying_repair,
+                       params.fill_holes)
 
 
 def _flying_in_roi(dcam: Camera, flying: np.ndarray, depth_m: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -332,6 +337,7 @@ class Registrar:
         self._float_images: dict[str, np.ndarray] = {}
         self.timings: dict[str, float] = {}
         self.warnings: list[str] = []  # about the inputs, found while preparing (see core/roi.py)
+        self._mixed_radius: dict[str, float] = {}  # source camera -> the mixed flag's radius, its px
 
     # -- caches
     def ray_cache(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
@@ -359,12 +365,13 @@ class Registrar:
     def _mixed(self, scam: Camera, uvh: np.ndarray, case_h: np.ndarray, obj_idx: np.ndarray,
                shape: tuple[int, int]) -> np.ndarray:
         """(H, W) bool: P1 pixels whose footprint in ``scam`` reaches across a silhouette (core/mixed.py)."""
-        from .mixed import mixed_radius, silhouette_distance
+        from .mixed import calibration_residual_px, mixed_radius, silhouette_distance
 
         meshes = self.meshes
         assert meshes is not None
         out = np.zeros(shape[0] * shape[1], dtype=bool)
-        r = mixed_radius(scam, self.params.mixed_radius_px)
+        r = mixed_radius(scam, self.params.mixed_radius_px, calibration_residual_px(self.rig.extra, scam.name))
+        self._mixed_radius[scam.name] = r
         p1 = np.flatnonzero(case_h == CASE_P1)
         unc = meshes.uncertainty
         if r <= 0 or len(p1) == 0 or unc.n_triangles == 0:
@@ -529,7 +536,9 @@ class Registrar:
             "target_pixels": int(N),
             "object_hits": int(len(obj_idx)),
             "flying_pixels": int(meshes.flying.sum()) if meshes.flying is not None else 0,
+            "filled_pixels": int(meshes.filled.sum()) if meshes.filled is not None else 0,
             "mixed_pixels": {cam: int(m.sum()) for cam, m in mixed.items()},
+            "mixed_radius_px": {cam: round(self._mixed_radius.get(cam, 0.0), 3) for cam in mixed},
         }
         progress(1.0, "done")
         return RegistrationResult(
@@ -593,7 +602,7 @@ def _mesh_key(rig: Rig, depth_m: np.ndarray, params: RegistrationParams) -> tupl
     geom = np.concatenate([dcam.K.ravel(), dcam.dist, dcam.R_cam_rig.ravel(), dcam.t_cam_rig, lo, hi,
                            [params.edge_angle_deg, params.boundary_px, dcam.width, dcam.height,
                             params.flying_filter, params.flying_jump_rel, params.denoise, params.denoise_size,
-                            params.denoise_tol_rel, params.flying_repair]])
+                            params.denoise_tol_rel, params.flying_repair, params.fill_holes]])
     return (h, geom.tobytes())
 
 

@@ -492,7 +492,6 @@ class LandmarkPage(QWidget):
 
     def _fit_finished(self, result) -> None:
         self.session.apply_fit(result)
-        s = self.session
         pc = result.report.get("per_camera", {})
         self.hint.setText("Fitted: " + ", ".join(f"{c} median {v['median_px']:.2f} px (n={v['n']})"
                                                  for c, v in pc.items()))
