@@ -145,7 +145,7 @@ class CloudView(QWidget):
         import pyvista as pv
 
         p = self.plotter
-        p.clear_actors()
+        p.clear_actors()  # (no render: render_now renders once, after the rebuild)
         self._mesh_actors.clear()
         self._poly = None
         if self.cloud is not None and len(self.cloud.points):
@@ -153,12 +153,12 @@ class CloudView(QWidget):
             poly.point_data["colour"] = self._colours()
             self._poly = poly
             p.add_mesh(poly, scalars="colour", rgb=True, point_size=self.point_size.value(),
-                       render_points_as_spheres=False, name="cloud", pickable=True)
+                       render_points_as_spheres=False, name="cloud", pickable=True, render=False)
         for name, (verts, tris) in self.meshes.items():
             faces = np.hstack([np.full((len(tris), 1), 3, np.int64), np.asarray(tris, np.int64)]).ravel()
             mesh = pv.PolyData(np.asarray(verts, np.float32), faces)
             actor = p.add_mesh(mesh, color=MESH_COLOURS[name], opacity=0.35, name=name, pickable=False,
-                               show_edges=False)
+                               show_edges=False, render=False)
             actor.SetVisibility(self.mesh_boxes[name].isChecked())
             self._mesh_actors[name] = actor
         if not self._dirty_camera_kept():
@@ -173,7 +173,7 @@ class CloudView(QWidget):
         y down and z towards the ground), so that the heights of leaves are visible."""
         pts = self.cloud.points if self.cloud is not None and len(self.cloud.points) else None
         if pts is None:
-            self.plotter.reset_camera()
+            self.plotter.reset_camera(render=False)
             return
         c = np.nanmedian(pts, axis=0).astype(float)
         ext = float(np.nanmax(np.nanpercentile(pts, 98, axis=0) - np.nanpercentile(pts, 2, axis=0)))
@@ -182,7 +182,7 @@ class CloudView(QWidget):
         up = np.array([0.0, 0.0, -1.0])
         up -= d * (up @ d)
         self.plotter.camera_position = [tuple(c + d * 2.0 * max(ext, 0.05)), tuple(c), tuple(up / np.linalg.norm(up))]
-        self.plotter.reset_camera()  # keeps the direction, fits the whole cloud
+        self.plotter.reset_camera(render=False)  # keeps the direction, fits the whole cloud
         self.plotter.camera.zoom(1.15)
         self._camera_set = True
 
