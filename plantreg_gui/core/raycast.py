@@ -74,12 +74,15 @@ def _distort(cam: Camera, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.
     K = cam.K
     x2, y2, xy = x * x, y * y, x * y
     r2 = x2 + y2
-    r4 = r2 * r2
     radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
     if k4 or k5 or k6:
         radial = radial / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-    xd = x * radial + 2 * p1 * xy + p2 * (r2 + 2 * x2) + s1 * r2 + s2 * r4
-    yd = y * radial + p1 * (r2 + 2 * y2) + 2 * p2 * xy + s3 * r2 + s4 * r4
+    xd = x * radial + 2 * p1 * xy + p2 * (r2 + 2 * x2)
+    yd = y * radial + p1 * (r2 + 2 * y2) + 2 * p2 * xy
+    if s1 or s2 or s3 or s4:  # thin prism: rare; its array passes are skipped on hot paths (refine's cost)
+        r4 = r2 * r2
+        xd = xd + s1 * r2 + s2 * r4
+        yd = yd + s3 * r2 + s4 * r4
     return K[0, 0] * xd + K[0, 2], K[1, 1] * yd + K[1, 2]
 
 

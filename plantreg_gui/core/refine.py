@@ -55,7 +55,7 @@ import numpy as np
 from .camera import Camera
 from .errors import InputError
 from .progress import CancelToken, Reporter, ensure_reporter
-from .raycast import pixel_rays_cam, project_points
+from .raycast import _has_tilt, distort_normalized, pixel_rays_cam, project_points
 from .recording import Recording
 from .register import Meshes, RegistrationParams, build_meshes, filter_depth, transport_pixels
 from .rig import Rig
@@ -306,11 +306,6 @@ class _Level:
     def __len__(self) -> int:
         return self.XT.shape[1]
 
-    @property
-    def X(self) -> np.ndarray:
-        """(n, 3) view of the points (the layout before ``XT``)."""
-        return self.XT.T
-
 
 def _prepare_recording(rig: Rig, rec: Recording, rays_cam: np.ndarray, p: RefineParams,
                        rng: np.random.Generator) -> _RecData:
@@ -368,50 +363,20 @@ def _visible(cam: Camera, data: _RecData, idx: np.ndarray, tol: float, radius: f
 
 
 # ---------------------------------------------------------------------------- cost
-def _project(cam: Camera, X: np.ndarray) -> np.ndarray:
-    """:func:`~.raycast.project_points` without its checks (points are in front of the camera), (N, 2)."""
-    if cam.dist.size > 5 and np.any(cam.dist[5:]):
-        return project_points(cam, X)[0]
-    Xc = X @ cam.R_cam_rig.T + cam.t_cam_rig
-    iz = 1.0 / np.maximum(Xc[:, 2], 1e-9)
-    x = Xc[:, 0] * iz
-    y = Xc[:, 1] * iz
-    d = np.zeros(5)
-    d[: cam.dist.size] = cam.dist[:5]
-    k1, k2, p1, p2, k3 = d
-    r2 = x * x + y * y
-    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xy2 = 2 * x * y
-    xd = x * radial + p1 * xy2 + p2 * (r2 + 2 * x * x)
-    yd = y * radial + p1 * (r2 + 2 * y * y) + p2 * xy2
-    K = cam.K
-    return np.stack([K[0, 0] * xd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=1)
-
-
 def _project_T(cam: Camera, XT: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_project` of points stored as rows ``XT`` (3, N) float64 -> ``u``, ``v`` (N,) each.
+    """:func:`~.raycast.project_points` of points stored as rows ``XT`` (3, N) float64 -> ``u``,
+    ``v`` (N,) each, without its NaN marking (callers keep points in front of the camera).
 
     The cost's hot path: ``R @ XT`` is one small BLAS call, where ``X @ R.T`` with X (N, 3) was
     measured at 40 ms CPU for 90,000 points with OpenBLAS threads spinning on a loaded machine
-    (this whole function: 3 ms). Same model and result as :func:`_project` (to 1e-12 px)."""
-    if cam.dist.size > 5 and np.any(cam.dist[5:]):
+    (this whole function: 3 ms). The lens model is raycast's (:func:`~.raycast.distort_normalized`)."""
+    if _has_tilt(cam):
         uv = project_points(cam, XT.T)[0]
         return uv[:, 0], uv[:, 1]
     t = cam.t_cam_rig
     Xc = cam.R_cam_rig @ XT
     iz = 1.0 / np.maximum(Xc[2] + t[2], 1e-9)
-    x = (Xc[0] + t[0]) * iz
-    y = (Xc[1] + t[1]) * iz
-    d = np.zeros(5)
-    d[: cam.dist.size] = cam.dist[:5]
-    k1, k2, p1, p2, k3 = d
-    xx, yy, xy = x * x, y * y, x * y
-    r2 = xx + yy
-    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    K = cam.K
-    u = K[0, 0] * (x * radial + 2 * p1 * xy + p2 * (r2 + 2 * xx)) + K[0, 2]
-    v = K[1, 1] * (y * radial + p1 * (r2 + 2 * yy) + 2 * p2 * xy) + K[1, 2]
-    return u, v
+    return distort_normalized(cam, (Xc[0] + t[0]) * iz, (Xc[1] + t[1]) * iz)
 
 
 def _project_uvz(cam: Camera, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
