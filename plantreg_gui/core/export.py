@@ -38,7 +38,7 @@ from .imageio import (TIFF_CODEC_DEFAULT, atomic_output_dir, atomic_path, atomic
                       dense_tiles, write_png, write_tiff_tiled)
 from .progress import Reporter, ensure_reporter
 from .recording import Recording
-from .hits import HitImage
+from .hits import HitImage, values_at
 from .register import AREA_NAMES, CASE_NAMES, RegistrationResult
 from .rig import Rig
 
@@ -468,7 +468,7 @@ def _ply_records(result: RegistrationResult, cams: list[str], names: dict[str, l
         columns("red", 3, "u1")[:] = 200
     v["row"], v["col"] = rows, cols
     for cam in cams:
-        columns(names[cam][0], len(names[cam]), "<f4")[:] = _values_at(result.registered[cam], flat, H * W)
+        columns(names[cam][0], len(names[cam]), "<f4")[:] = values_at(result.registered[cam], flat)
     for cam, p in case_props.items():
         v[p] = np.asarray(result.cases[cam], dtype=np.uint8).reshape(-1)[flat]
     for cam, p in (mixed_props or {}).items():
@@ -602,18 +602,6 @@ def _ply_name(name: str) -> str:
 def _bands(a: np.ndarray) -> int:
     shape = a.shape if hasattr(a, "shape") else np.shape(a)  # a HitImage is not expanded for this
     return int(shape[2]) if len(shape) == 3 else 1
-
-
-def _values_at(reg: Any, flat: np.ndarray, n: int) -> np.ndarray:
-    """(len(flat), C) float32 values of a registered image at row-major pixel indices ``flat``."""
-    if isinstance(reg, HitImage):
-        out = np.full((len(flat), reg.bands), np.nan, dtype=np.float32)
-        if len(reg.index):
-            pos = np.minimum(np.searchsorted(reg.index, flat), len(reg.index) - 1)
-            ok = reg.index[pos] == flat
-            out[ok] = reg.values[pos[ok]]
-        return out
-    return np.asarray(reg, dtype=np.float32).reshape(n, -1)[flat]
 
 
 def _rig_camera(rig: Rig, name: str):

@@ -130,4 +130,19 @@ def as_hit_image(a: Any) -> HitImage | None:
     return a if isinstance(a, HitImage) else None
 
 
-__all__ = ["HitImage", "as_hit_image"]
+def values_at(img: Any, flat: np.ndarray) -> np.ndarray:
+    """(n, C) float32 values of a registered image -- an (H, W[, C]) array or a
+    :class:`HitImage` -- at the row-major pixel indices ``flat`` (n,); NaN where a HitImage has
+    no hit. Only those pixels are read: a HitImage is never expanded."""
+    if isinstance(img, HitImage):
+        out = np.full((len(flat), img.bands), np.nan, dtype=np.float32)
+        if len(img.index):
+            pos = np.minimum(np.searchsorted(img.index, flat), len(img.index) - 1)
+            ok = img.index[pos] == flat
+            out[ok] = img.values[pos[ok]]
+        return out
+    a = np.asarray(img)
+    return a.reshape(a.shape[0] * a.shape[1], -1)[flat].astype(np.float32, copy=False)
+
+
+__all__ = ["HitImage", "as_hit_image", "values_at"]

@@ -19,6 +19,7 @@ import numpy as np
 
 from .cases import Case
 from .errors import InputError
+from .hits import values_at
 
 
 def region_mask(shape: tuple[int, int], rect: Sequence[float] | None = None,
@@ -82,23 +83,6 @@ class RegionStats:
         return int(self.mean.size)
 
 
-def _values_at(reg: Any, flat: np.ndarray) -> np.ndarray:
-    """(n, B) float32 values of a registered image (array or HitImage) at the row-major pixel
-    indices ``flat`` (n,), NaN where not mapped; only those pixels are read (a large cube is never
-    expanded)."""
-    shape = reg.shape if hasattr(reg, "shape") else np.shape(reg)
-    B = int(shape[2]) if len(shape) == 3 else 1
-    index = getattr(reg, "index", None)
-    if index is not None and not isinstance(reg, np.ndarray):  # HitImage: values at its hits only
-        out = np.full((len(flat), B), np.nan, np.float32)
-        if len(index):
-            pos = np.minimum(np.searchsorted(index, flat), len(index) - 1)
-            ok = index[pos] == flat
-            out[ok] = reg.values[pos[ok]]
-        return out
-    return np.asarray(reg).reshape(int(shape[0]) * int(shape[1]), B)[flat].astype(np.float32, copy=False)
-
-
 def region_stats(result: Any, mask: np.ndarray, source: str, wavelengths: np.ndarray | None = None,
                  unit: str = "") -> RegionStats:
     """Statistics of ``source`` over the ``mask`` (H, W) bool pixels of ``result`` (a
@@ -123,7 +107,7 @@ def region_stats(result: Any, mask: np.ndarray, source: str, wavelengths: np.nda
     mixed = np.asarray(mixed_map, bool)[mask] if mixed_map is not None else np.zeros(n, bool)
     p1 = cm == Case.P1
     cand = np.flatnonzero(mask.ravel())[p1 & ~mixed]  # only these pixels' values are read
-    vals = _values_at(result.registered[source], cand)
+    vals = values_at(result.registered[source], cand)
     B = vals.shape[1]
     # (B, n) contiguous float32: per-band reductions along memory order are ~8x faster for cubes
     v = np.ascontiguousarray(vals[np.isfinite(vals).all(axis=1)].T)
