@@ -774,7 +774,7 @@ _DROP = textwrap.dedent("""
     import numpy, cv2, tifffile, PIL.Image, PIL.PngImagePlugin, PIL.JpegImagePlugin, spectral.io.envi
     import json, tempfile, shutil, signal, threading, stat, errno, warnings, re, math, argparse
     import plantreg_gui.cli, plantreg_gui.cli.register_cmd, plantreg_gui.core.export, plantreg_gui.core.recording
-    import plantreg_gui.core.register, plantreg_gui.core.validate, numpy.lib.format, shlex
+    import plantreg_gui.core.register, plantreg_gui.core.validate, plantreg_gui.core.o3d_core, numpy.lib.format, shlex
     plantreg_gui.cli.build_parser()
     os.setgroups([]); os.setgid(65534); os.setuid(65534)
 """)
