@@ -90,7 +90,7 @@ class RegistrationResult:
 
     ``points_rig`` (H, W, 3) float32: first object-mesh hit of each target ray, NaN if none.
     ``registered[cam]`` (H, W) or (H, W, B) float32, NaN where not mapped, for every camera incl. the target;
-    above :data:`DENSE_LIMIT_BYTES` a :class:`~.hits.HitImage` (values at the hits only; behaves
+    above :data:`DENSE_LIMIT_BYTES` (cubes: see :func:`keep_at_hits`) a :class:`~.hits.HitImage` (values at the hits only; behaves
     like the array: ``np.asarray``, indexing, ``.shape``).
     ``source_uv[cam]`` (H, W, 2) float32 distorted source pixel coordinates of the hit (NaN if none).
     ``cases[cam]`` (H, W) uint8 for every camera except the target. ``area`` (H, W) uint8.
@@ -561,14 +561,28 @@ class Registrar:
 #: (values at the object hits only, expanded on demand): a 204-band cube in a 4K view is 6.8 GB
 #: dense, ~0.8 GB at the hits. Smaller ones stay plain arrays.
 DENSE_LIMIT_BYTES = 1 << 30
+#: Cubes (more than 4 bands) are kept at the hits already above this size, in views of at most
+#: :data:`CUBE_HITS_MAX_PIXELS` pixels: the 204-band cube in the 640x576 infrared view is 300 MB
+#: dense, 88 % NaN -- filling it, scanning its tiles for NaN when writing and its rows when
+#: rendering cost ~0.5 s CPU of a 3.5 s `plantreg register`. Up to that many pixels a preview
+#: takes its statistics from every pixel, so the hits-only preview is the dense one bit for bit
+#: (core.display: ``_MAX_SAMPLES``); above it, the (strided) statistics may pick other pixels.
+CUBE_HITS_BYTES = 64 << 20
+CUBE_HITS_MAX_PIXELS = 1_000_000
+
+
+def keep_at_hits(H: int, W: int, C: int) -> bool:
+    """Whether a registered image (H, W, C) float32 is kept as a :class:`~.hits.HitImage`."""
+    dense = H * W * C * 4
+    return dense > DENSE_LIMIT_BYTES or (C > 4 and dense > CUBE_HITS_BYTES and H * W <= CUBE_HITS_MAX_PIXELS)
 
 
 def _registered_image(obj_idx: np.ndarray, vals: np.ndarray, H: int, W: int, img: np.ndarray):
     """Values (M, C) float32 at the target pixels ``obj_idx`` (M,) -> the registered image:
-    (H, W[, C]) float32, NaN elsewhere, or the same as a HitImage above :data:`DENSE_LIMIT_BYTES`."""
+    (H, W[, C]) float32, NaN elsewhere, or the same as a HitImage (:func:`keep_at_hits`)."""
     C = vals.shape[1]
     shape = (H, W) if img.ndim == 2 or C == 1 else (H, W, C)
-    if H * W * C * 4 > DENSE_LIMIT_BYTES:
+    if keep_at_hits(H, W, C):
         from .hits import HitImage
 
         return HitImage(obj_idx, vals, shape)
