@@ -1,0 +1,78 @@
+"""Issue 10 speed work that must not change a value: cubes kept at the object hits in small
+views (previews, TIFFs, PLY and summary equal to the dense registration's, bit for bit), and
+the command line's single-threaded BLAS."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import tifffile
+
+from plantreg_gui.core import register as register_mod
+from plantreg_gui.core.display import to_rgb8
+from plantreg_gui.core.export import write_outputs
+from plantreg_gui.core.hits import HitImage
+from plantreg_gui.core.recording import Recording
+from plantreg_gui.core.register import Registrar, keep_at_hits
+from plantreg_gui.core.rig import Rig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_which_images_are_kept_at_the_hits():
+    # the paper rig: 204-band cube in the 640x576 infrared view (300 MB dense) and in the 4K view
+    assert keep_at_hits(576, 640, 204) and keep_at_hits(2160, 3840, 204)
+    # RGB and single-band images stay dense up to 1 GB (the 4K RGB target itself: 100 MB)
+    assert not keep_at_hits(2160, 3840, 3) and not keep_at_hits(576, 640, 1)
+    # small cubes stay dense; a cube in a view above 1 MP stays dense below 1 GB (its preview's
+    # statistics are subsampled there: the hits-only preview could pick other pixels)
+    assert not keep_at_hits(200, 200, 204)
+    assert not keep_at_hits(1100, 1100, 204) and keep_at_hits(1200, 1200, 204)
+
+
+def test_cube_at_hits_writes_the_dense_outputs(demo_dir, tmp_path, monkeypatch):
+    """With the cube kept at the hits, every output (TIFF decoded, previews and mosaic PNGs,
+    PLY bytes, summary) equals the dense registration's."""
+    rig = Rig.load(demo_dir / "rig.json")
+    rec = Recording.load(demo_dir / "recording", rig)
+    monkeypatch.setattr(register_mod, "CUBE_HITS_BYTES", 1 << 40)  # the dense registration of before
+    dense = Registrar(rig, rec).register("ir")
+    cube = next(c for c, v in dense.registered.items() if np.ndim(v) == 3 and v.shape[2] > 4)
+    assert isinstance(dense.registered[cube], np.ndarray)
+    monkeypatch.setattr(register_mod, "CUBE_HITS_BYTES", 64 << 20)  # the default: the 576 x 640 x 100 cube is 147 MB
+    sparse = Registrar(rig, rec).register("ir")
+    assert isinstance(sparse.registered[cube], HitImage)
+    assert all(isinstance(v, np.ndarray) for c, v in sparse.registered.items() if c != cube)
+    mod = rig.camera(cube).modality
+    assert np.array_equal(to_rgb8(sparse.registered[cube], modality=mod), to_rgb8(dense.registered[cube], modality=mod))
+    out_d, out_s = tmp_path / "d", tmp_path / "s"
+    write_outputs(dense, rig, rec, out_d)
+    write_outputs(sparse, rig, rec, out_s)
+    files = sorted(p.relative_to(out_d) for p in out_d.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(out_s) for p in out_s.rglob("*") if p.is_file())
+    for rel in files:
+        a, b = out_d / rel, out_s / rel
+        if rel.suffix == ".tif":
+            assert tifffile.imread(b).tobytes() == tifffile.imread(a).tobytes(), rel
+        elif rel.suffix == ".png":
+            assert np.array_equal(cv2.imread(str(a), cv2.IMREAD_UNCHANGED), cv2.imread(str(b), cv2.IMREAD_UNCHANGED)), rel
+        elif rel.suffix == ".ply":
+            assert a.read_bytes() == b.read_bytes()
+    sd, ss = (json.loads((o / "summary.json").read_text()) for o in (out_d, out_s))
+    assert sd["cameras"] == ss["cameras"] and sd["cases"] == ss["cases"]
+
+
+def test_cli_runs_blas_in_one_thread_unless_told():
+    probe = "import plantreg_gui.cli, os; print(os.environ['OPENBLAS_NUM_THREADS'])"
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    run = lambda e: subprocess.run([sys.executable, "-c", probe], env=e, capture_output=True, text=True,  # noqa: E731
+                                   check=True).stdout.strip()
+    assert run(env) == "1"
+    assert run({**env, "OPENBLAS_NUM_THREADS": "3"}) == "3"  # the user's setting wins
