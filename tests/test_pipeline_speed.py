@@ -76,3 +76,33 @@ def test_cli_runs_blas_in_one_thread_unless_told():
                                    check=True).stdout.strip()
     assert run(env) == "1"
     assert run({**env, "OPENBLAS_NUM_THREADS": "3"}) == "3"  # the user's setting wins
+
+
+def test_values_at_a_run_of_hits_is_their_values():
+    from plantreg_gui.core.hits import values_at
+
+    rng = np.random.default_rng(5)
+    H, W, B = 30, 40, 7
+    idx = np.sort(rng.choice(H * W, 300, replace=False))
+    vals = rng.random((300, B), dtype=np.float32)
+    img = HitImage(idx, vals, (H, W, B))
+    dense = np.asarray(img).reshape(H * W, B)
+    for flat in (idx, idx[17:200], idx[:1], idx[::2], np.array([idx[3], idx[3] + 1]), np.arange(H * W)):
+        got = values_at(img, flat)
+        assert got.shape == (len(flat), B) and np.array_equal(got, dense[flat], equal_nan=True)
+    run = values_at(img, idx[17:200])
+    assert not run.flags.writeable  # a view of the image's own values: not to be changed through it
+
+
+def test_tiled_writer_with_threads_keeps_tile_order(tmp_path):
+    """Many small tiles encoded by several threads, in windows: the file decodes to the image."""
+    from plantreg_gui.core.imageio import dense_tiles, write_tiff_tiled
+
+    rng = np.random.default_rng(9)
+    a = rng.random((333, 517, 204), dtype=np.float32)  # 16 x 16 tiles, ragged edges
+    a[rng.random(a.shape[:2]) < 0.6] = np.nan
+    a[:100, :200] = np.nan  # empty tiles
+    for codec in ("deflate-fp", "zstd"):
+        p = tmp_path / f"{codec}.tif"
+        write_tiff_tiled(p, a.shape, np.float32, dense_tiles(a), codec=codec, workers=3)
+        assert tifffile.imread(p).tobytes() == a.tobytes()

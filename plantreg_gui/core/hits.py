@@ -133,8 +133,16 @@ def as_hit_image(a: Any) -> HitImage | None:
 def values_at(img: Any, flat: np.ndarray) -> np.ndarray:
     """(n, C) float32 values of a registered image -- an (H, W[, C]) array or a
     :class:`HitImage` -- at the row-major pixel indices ``flat`` (n,); NaN where a HitImage has
-    no hit. Only those pixels are read: a HitImage is never expanded."""
+    no hit. Only those pixels are read: a HitImage is never expanded. When ``flat`` is a run of
+    the HitImage's own hits (the point cloud's rows), its values are returned as a read-only view."""
     if isinstance(img, HitImage):
+        n = len(flat)
+        if 0 < n <= len(img.index):
+            p = int(np.searchsorted(img.index, flat[0]))
+            if p + n <= len(img.index) and np.array_equal(img.index[p : p + n], flat):
+                view = img.values[p : p + n]
+                view.flags.writeable = False
+                return view
         out = np.full((len(flat), img.bands), np.nan, dtype=np.float32)
         if len(img.index):
             pos = np.minimum(np.searchsorted(img.index, flat), len(img.index) - 1)

@@ -118,8 +118,12 @@ class RegistrationResult:
         return self.area.shape  # type: ignore[return-value]
 
     def case_counts(self) -> dict[str, dict[int, int]]:
-        return {cam: {int(k): int(v) for k, v in zip(*np.unique(c, return_counts=True))}
-                for cam, c in self.cases.items()}
+        # bincount, not np.unique: no sort of H x W codes (0.1 s per camera in a 4K view)
+        out = {}
+        for cam, c in self.cases.items():
+            counts = np.bincount(np.asarray(c, dtype=np.uint8).ravel())
+            out[cam] = {int(k): int(counts[k]) for k in np.flatnonzero(counts)}
+        return out
 
 
 # ---------------------------------------------------------------------------- sampling
