@@ -528,7 +528,12 @@ class Registrar:
                 with _stage(progress, timings, f"sampling {scam.name}", a + 0.5 * (b - a), b):
                     img = images[scam.name]
                     C = 1 if img.ndim == 2 else int(np.prod(img.shape[2:]))
-                    vals = np.full((len(obj_idx), C), np.nan, dtype=np.float32)  # at the hits only
+                    # at the hits only; NaN written only where no sample will be (a full NaN
+                    # pass first cost ~0.5 s for the 1 GB of a 204-band cube in a 4K view)
+                    vals = np.empty((len(obj_idx), C), dtype=np.float32)
+                    sampled = np.zeros(len(obj_idx), dtype=bool)
+                    sampled[in_idx[np.isfinite(uvh[in_idx]).all(axis=1)]] = True  # sample_bilinear's rows
+                    vals[~sampled] = np.nan
                     sample_bilinear(img, uvh[in_idx], progress.sub(a + 0.5 * (b - a), b), out=vals, rows=in_idx)
                     registered[scam.name] = _registered_image(obj_idx, vals, H, W, img)
 
