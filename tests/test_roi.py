@@ -6,9 +6,9 @@ depth camera's frame; the plant (pot, soil, stems, leaves) lies in front of it. 
 board's box -- what the wizard's old "Fit ROI to this depth map" produced on a board pose --
 puts the ground plane at 0.56 m and keeps about one leaf.
 
-Real truth: the six Plant3DImageReg plants stand in a tray tilted by ~16 deg among frames and
-cables; the shipped rig's hand-set ROI keeps every plant whole (looked at) and drops the tray
-bottom, the floor and the surroundings -- most of the measured depth. That must not warn.
+Real truth: the six Plant3DImageReg plants stand in a tray among frames and cables; the shipped
+rig's hand-set ROI keeps every plant whole (looked at) and drops the tray, the floor and the
+surroundings -- most of the measured depth. That must not warn.
 """
 
 from __future__ import annotations
