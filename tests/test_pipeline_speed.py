@@ -106,3 +106,40 @@ def test_tiled_writer_with_threads_keeps_tile_order(tmp_path):
         p = tmp_path / f"{codec}.tif"
         write_tiff_tiled(p, a.shape, np.float32, dense_tiles(a), codec=codec, workers=3)
         assert tifffile.imread(p).tobytes() == a.tobytes()
+
+
+def test_rays_cast_only_where_they_can_hit_give_the_same_registration(demo_dir, monkeypatch):
+    """Target rays outside the meshes' cone are not cast (rays_may_hit): every array of the
+    registration equals the one casting all rays, for two targets that cast (thermal, rgb)."""
+    from plantreg_gui.core import raycast
+
+    rig = Rig.load(demo_dir / "rig.json")
+    rec = Recording.load(demo_dir / "recording", rig)
+    calls = []
+    real = register_mod.rays_may_hit
+
+    def spy(*a, **k):
+        m = real(*a, **k)
+        calls.append(None if m is None else float(m.mean()))
+        return m
+
+    for target in ("thermal", "rgb"):
+        calls.clear()
+        monkeypatch.setattr(register_mod, "rays_may_hit", spy)
+        fast = Registrar(rig, rec).register(target)
+        assert len(calls) == 2 and all(c is not None and 0 < c < 0.6 for c in calls), calls  # a real cut
+        monkeypatch.setattr(register_mod, "rays_may_hit", lambda *a, **k: None)
+        full = Registrar(rig, rec).register(target)
+        assert np.array_equal(fast.points_rig, full.points_rig, equal_nan=True)
+        assert np.array_equal(fast.area, full.area)
+        for cam in full.cases:
+            assert np.array_equal(fast.cases[cam], full.cases[cam]), (target, cam)
+        for cam in full.registered:
+            assert np.array_equal(np.asarray(fast.registered[cam]), np.asarray(full.registered[cam]), equal_nan=True)
+    # the bound itself: rays towards a triangle's corners and centre may hit, rays beside it not
+    V = np.array([[0.0, 0.0, 1.0], [0.1, 0.0, 1.0], [0.0, 0.1, 1.0]], np.float32)
+    d = np.array([[0.03, 0.03, 1.0], [0.1, 0.0, 1.0], [0.2, 0.0, 1.0], [0.0, -0.05, 1.0], [0.03, 0.03, -1.0]])
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    T = np.array([[0, 1, 2]])
+    assert raycast.rays_may_hit(np.zeros(3), np.eye(3), d.astype(np.float32), V, T).tolist() == [True, True, False, False, False]
+    assert raycast.rays_may_hit(np.zeros(3), np.eye(3), d, V - [0, 0, 2], T) is None  # behind the camera: no bound

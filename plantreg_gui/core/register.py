@@ -47,7 +47,8 @@ from .cases import AREA_NAMES, CASE_NAMES, Area, Case  # noqa: F401 (re-exported
 from .errors import InputError
 from .mesh import TriMesh, extend_boundary, object_mesh, uncertainty_mesh
 from .progress import Reporter, ensure_reporter
-from .raycast import RAY_CHUNK, MeshScene, pixel_rays_cam, pixel_rays_rig, project_points
+from .raycast import (RAY_CHUNK, MeshScene, cast_where, pixel_rays_cam, pixel_rays_rig, project_points,
+                      rays_may_hit)
 from .recording import Recording
 from .rig import Rig
 
@@ -455,7 +456,9 @@ class Registrar:
                 obj_idx, points, p31, no_idx, p5 = self._depth_camera_hits(meshes, N)
             else:
                 dirs = self._target_rays(tcam)
-                hits = meshes.object_scene.cast(o_t, dirs, check=progress.check)
+                # only the rays that can reach a mesh are cast (a 4K view: a fraction of 8.3 M)
+                may = rays_may_hit(o_t, tcam.R_cam_rig, dirs, meshes.object.vertices, meshes.object.triangles)
+                hits = cast_where(meshes.object_scene, o_t, dirs, may, check=progress.check)
                 obj_idx = np.flatnonzero(hits.hit)
                 t_obj = hits.t[obj_idx]
                 points = np.full((N, 3), np.nan, dtype=np.float32)
@@ -464,7 +467,10 @@ class Registrar:
                 seg = dirs[obj_idx] * np.maximum(t_obj - np.float32(p.uncertainty_tol_m), 0)[:, None]
                 p31 = meshes.uncertainty_scene.occluded(o_t, seg, 1.0, check=progress.check)
                 no_idx = np.flatnonzero(~hits.hit)
-                p5 = meshes.uncertainty_scene.occluded(o_t, dirs[no_idx], np.inf, check=progress.check)
+                may_u = rays_may_hit(o_t, tcam.R_cam_rig, dirs, meshes.uncertainty.vertices, meshes.uncertainty.triangles)
+                p5 = np.zeros(len(no_idx), dtype=bool)
+                test = np.arange(len(no_idx)) if may_u is None else np.flatnonzero(may_u[no_idx])
+                p5[test] = meshes.uncertainty_scene.occluded(o_t, dirs[no_idx[test]], np.inf, check=progress.check)
             area = np.full(N, AREA_P6, dtype=np.uint8)
             area[obj_idx] = np.where(p31, AREA_P5, AREA_P4)
             area[no_idx[p5]] = AREA_P5
