@@ -15,7 +15,7 @@ import numpy as np
 import tifffile
 
 from plantreg_gui.core import register as register_mod
-from plantreg_gui.core.display import to_rgb8
+from plantreg_gui.core.display import fit_pca, to_rgb8
 from plantreg_gui.core.export import write_outputs
 from plantreg_gui.core.hits import HitImage
 from plantreg_gui.core.recording import Recording
@@ -143,3 +143,16 @@ def test_rays_cast_only_where_they_can_hit_give_the_same_registration(demo_dir, 
     T = np.array([[0, 1, 2]])
     assert raycast.rays_may_hit(np.zeros(3), np.eye(3), d.astype(np.float32), V, T).tolist() == [True, True, False, False, False]
     assert raycast.rays_may_hit(np.zeros(3), np.eye(3), d, V - [0, 0, 2], T) is None  # behind the camera: no bound
+
+
+def test_hit_image_preview_uses_the_given_pca_basis():
+    """The desktop app renders registered cubes with the raw cube's PCA basis (raw and registered
+    look alike); a cube kept at the hits must be drawn with that basis too, not one of its own."""
+    rng = np.random.default_rng(1)
+    H, W, B = 60, 70, 20
+    basis = fit_pca(rng.random((50, 50, B), dtype=np.float32))
+    idx = np.sort(rng.choice(H * W, 900, replace=False))
+    img = HitImage(idx, rng.random((900, B), dtype=np.float32), (H, W, B))
+    a = to_rgb8(img, modality="hyperspectral", pca=basis)
+    assert np.array_equal(a, to_rgb8(np.asarray(img), modality="hyperspectral", pca=basis))
+    assert not np.array_equal(a, to_rgb8(img, modality="hyperspectral"))  # the basis matters here

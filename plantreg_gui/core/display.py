@@ -334,7 +334,7 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
     if isinstance(img, HitImage):  # render the hits only (statistics are of finite pixels anyway)
         sub = np.asarray(mask, dtype=bool).reshape(-1)[img.index][:, None] if mask is not None else None
         vals = img.values[:, None, :] if img.ndim == 3 else img.values
-        rgb = to_rgb8(vals, modality, cmap, limits, percentiles, bands, sub)
+        rgb = to_rgb8(vals, modality, cmap, limits, percentiles, bands, sub, pca)  # the raw cube's basis too
         out = np.empty((img.shape[0] * img.shape[1], 3), np.uint8)
         out[:] = BACKGROUND_RGB
         out[img.index] = rgb.reshape(-1, 3)
