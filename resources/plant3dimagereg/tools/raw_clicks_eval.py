@@ -17,7 +17,7 @@ landmark test (clicks spread over the plant) it moved 3 of 24 clicks near an ove
 edge onto the front leaf (outliers), i.e. the rule is wrong for clicks that are not silhouette
 features.
 
-  cd resources/plant3dimagereg/tools && PYTHONPATH=../../.. python raw_clicks_eval.py [raw,raw_uv_stepped_z,shipped] [FREE]
+  cd resources/plant3dimagereg/tools && PYTHONPATH=../../.. python raw_clicks_eval.py [raw,raw_uv_stepped_z,mapped_step,shipped] [FREE]
 """
 
 from __future__ import annotations
@@ -148,13 +148,49 @@ def edge_depth(depth_m: np.ndarray, uv: np.ndarray, radius: int = 3, min_support
     return float(np.median(nearest)), ""
 
 
-def recordings(variant: str, rig: Rig) -> list[RecordingLandmarks]:
+_DEPTH: dict[str, np.ndarray] = {}
+
+
+def mapped_step(rig: Rig, plant: str, cam: str, it: dict) -> list[float]:
+    """The other camera's click moved by the image of the infrared step's 3D displacement in the
+    START rig (independent of the landmarks): X_raw = front-surface point at the read infrared
+    pixel (``edge_depth``), X_step = the stepped point (core depth); instead of finalize.py's
+    guessed x1.8 / x2.2 along the other image's own inward direction."""
+    if plant not in _DEPTH:
+        _DEPTH[plant] = Recording.load(RES / "recordings" / plant).depth_m(rig.depth_scale)
+    d, dcam, ocam = _DEPTH[plant], rig.depth(), rig.camera(cam)
+    pts = []
+    for uv, depth in ((it["feature_ir"], edge_depth), (it["ir"], rigfit.landmark_depth)):
+        z, _ = depth(d, np.array(uv, float))
+        pts.append(dcam.to_rig(dcam.rays_cam(np.array([uv], float)) * z))
+    (a, _), (b, _) = ocam.project(pts[0]), ocam.project(pts[1])
+    return (np.asarray(it["feature_other"], float) + (b[0] - a[0])).tolist()
+
+
+def offset_other(it: dict, plant: str, cam: str, delta: float) -> list[float]:
+    """The shipped other-camera point moved ``delta`` px further along its own inward direction
+    (a per-modality edge offset: each image may draw a leaf's edge at a different place)."""
+    from finalize import SCALE, inward_normal
+
+    po = np.asarray(it["feature_other"], float)
+    n = np.asarray(it["other"], float) - po
+    n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-6 else inward_normal(plant, cam, po, 8.0 * SCALE[cam])
+    return (np.asarray(it["other"], float) + delta * n).tolist()
+
+
+def recordings(variant: str, rig: Rig, delta: float = 0.0, only: set[str] | None = None) -> list[RecordingLandmarks]:
     ann = json.loads((HERE / "annotations.json").read_text())
     pts: dict[str, list[Landmark]] = {}
     for key, items in ann.items():
         plant, cam = key.split("/")
         for it in items:
             ir, oth = (it["ir"], it["other"]) if variant == "shipped" else (it["feature_ir"], it["feature_other"])
+            if only is not None and plant not in only:
+                continue
+            if variant == "edge_offset":
+                ir, oth = it["ir"], offset_other(it, plant, cam, delta)
+            if variant == "mapped_step":
+                ir, oth = it["ir"], mapped_step(rig, plant, cam, it)
             # stepped_ir: where raw_uv_stepped_z reads the depth (the validated inner point)
             pts.setdefault(plant, []).append(Landmark(np.array(ir), {cam: np.array(oth)}, it["note"],
                                                       {"stepped_ir": it["ir"]}))
@@ -165,7 +201,36 @@ def recordings(variant: str, rig: Rig) -> list[RecordingLandmarks]:
     return out
 
 
+def nested_edge_offset(rig: Rig, free: str, deltas=np.arange(-3.0, 3.01, 0.5)) -> None:
+    """Leave-one-plant-out with the hyperspectral edge offset chosen WITHOUT the held-out plant:
+    per fold, the offset whose fit on the other plants has the smallest median hyperspectral
+    residual; then the held-out plant's residuals with that fold's rig."""
+    plants = sorted({k.split("/")[0] for k in json.loads((HERE / "annotations.json").read_text())
+                     if k.endswith("/hyperspectral")})
+    held = []
+    for p in plants:
+        rest = set(plants) - {p}
+        best = None
+        for d in deltas:
+            try:
+                r = fit_rig(rig, recordings("edge_offset", rig, d, rest), free=rigfit.parse_free(free), loo=False,
+                            cameras=["hyperspectral"])
+            except Exception as e:  # noqa: BLE001 - a fold without enough landmarks
+                print("  fold", p, d, e)
+                continue
+            m = r.report["per_camera"]["hyperspectral"]["median_px"]
+            if best is None or m < best[0]:
+                best = (m, d, r.rig)
+        rows, _ = rigfit.evaluate_landmarks(best[2], recordings("edge_offset", rig, best[1], {p}), ["hyperspectral"])
+        res = [x["residual_px"] for x in rows]
+        held += res
+        print(f"   fold without {p}: offset {best[1]:+.1f} px (training median {best[0]:.2f}), held-out median {np.median(res):.2f}")
+    print(f"== nested edge offset (free {free}): hyperspectral LOPO median {np.median(held):.2f} p90 {np.percentile(held, 90):.2f} (n {len(held)})")
+
+
 def main() -> None:
+    if sys.argv[1:2] == ["nested_edge_offset"]:
+        return nested_edge_offset(Rig.load(RES / "rig_nominal.json"), sys.argv[2] if len(sys.argv) > 2 else "ir:k1")
     variants = (sys.argv[1] if len(sys.argv) > 1 else "raw,shipped").split(",")
     free = sys.argv[2] if len(sys.argv) > 2 else "ir:k1"
     rig = Rig.load(RES / "rig_nominal.json")
