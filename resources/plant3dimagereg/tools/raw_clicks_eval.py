@@ -228,7 +228,42 @@ def nested_edge_offset(rig: Rig, free: str, deltas=np.arange(-3.0, 3.01, 0.5)) -
     print(f"== nested edge offset (free {free}): hyperspectral LOPO median {np.median(held):.2f} p90 {np.percentile(held, 90):.2f} (n {len(held)})")
 
 
+def _aspect_rig(rig: Rig, axis: int, a: float) -> Rig:
+    r = Rig.from_dict(rig.to_dict())
+    r.camera("hyperspectral").K[axis, axis] *= a
+    return r
+
+
+def nested_aspect(rig: Rig, free: str, scales=np.arange(0.94, 1.061, 0.01)) -> None:
+    """Leave-one-plant-out with the hyperspectral pixel aspect (fx or fy alone scaled; the Specim IQ
+    scans one image axis, so its two focal lengths need not be equal) chosen WITHOUT the held-out
+    plant: per fold, the (axis, scale) whose fit on the other plants has the smallest median
+    hyperspectral residual; then the held-out plant with that fold's rig."""
+    plants = sorted({k.split("/")[0] for k in json.loads((HERE / "annotations.json").read_text())
+                     if k.endswith("/hyperspectral")})
+    held = []
+    for p in plants:
+        rest = set(plants) - {p}
+        best = None
+        for axis in (0, 1):
+            for a in scales:
+                r = fit_rig(_aspect_rig(rig, axis, a), recordings("shipped", rig, 0.0, rest),
+                            free=rigfit.parse_free(free), loo=False, cameras=["hyperspectral"])
+                m = r.report["per_camera"]["hyperspectral"]["median_px"]
+                if best is None or m < best[0] - 1e-9:
+                    best = (m, "fx" if axis == 0 else "fy", a, r.rig)
+        rows, _ = rigfit.evaluate_landmarks(best[3], recordings("shipped", rig, 0.0, {p}), ["hyperspectral"])
+        res = [x["residual_px"] for x in rows]
+        held += res
+        print(f"   fold without {p}: {best[1]} x {best[2]:.2f} (training median {best[0]:.2f}), "
+              f"held-out median {np.median(res):.2f}")
+    print(f"== nested aspect (free {free}): hyperspectral LOPO median {np.median(held):.2f} "
+          f"p90 {np.percentile(held, 90):.2f} (n {len(held)})")
+
+
 def main() -> None:
+    if sys.argv[1:2] == ["nested_aspect"]:
+        return nested_aspect(Rig.load(RES / "rig_nominal.json"), sys.argv[2] if len(sys.argv) > 2 else "ir:k1")
     if sys.argv[1:2] == ["nested_edge_offset"]:
         return nested_edge_offset(Rig.load(RES / "rig_nominal.json"), sys.argv[2] if len(sys.argv) > 2 else "ir:k1")
     variants = (sys.argv[1] if len(sys.argv) > 1 else "raw,shipped").split(",")
