@@ -124,6 +124,47 @@ def test_region_polygon_by_clicks(registered_workspace, qtbot):
     ws.region_panel.set_tool(None)
 
 
+def test_escape_cancels_the_polygon_being_drawn(registered_workspace, qtbot):
+    """Escape drops the corners clicked so far; the region drawn before stays (outline and
+    statistics), and the next clicks start a new polygon."""
+    from PySide6.QtCore import QPointF, Qt
+
+    ws = registered_workspace
+    s = ws.session
+    x0, y0, x1, y1 = s.home
+    s.set_region("rect", (x0, y0, (x0 + x1) / 2, (y0 + y1) / 2))
+    qtbot.waitUntil(lambda: s.region_stats is not None and not ws.is_busy(), timeout=5000)
+    before = s.region
+    ws.region_panel.set_tool("polygon")
+    view = ws.sbs_grid.views[s.result.target].view
+    shown = [(p.x(), p.y()) for p in view._region.polygon()]
+    assert len(shown) == 4
+    for c in [(x0, y0), (x1, y0), (x1, y1)]:
+        qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=view.mapFromScene(QPointF(*c)))
+    assert len(view._region.polygon()) == 4 and view._drawing  # 3 corners + the one following the mouse
+    qtbot.keyClick(view, Qt.Key.Key_Escape)
+    assert not view._drawing
+    assert [(p.x(), p.y()) for p in view._region.polygon()] == shown  # the earlier region again
+    assert s.region == before and s.region_stats is not None
+    assert view.draw_mode == "polygon"  # the tool stays: the next clicks start afresh
+    corners = [((x0 + x1) / 2, y0), (x1, (y0 + y1) / 2), (x1, y1)]
+    for c in corners:
+        qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=view.mapFromScene(QPointF(*c)))
+    qtbot.mouseDClick(view.viewport(), Qt.MouseButton.LeftButton, pos=view.mapFromScene(QPointF(*corners[-1])))
+    kind, pts = s.region
+    assert kind == "polygon" and len(pts) == 3  # none of the cancelled corners
+    scale = view.transform().m11()
+    assert all(abs(px - cx) <= 1.5 / scale + 1e-6 for (px, _), (cx, _) in zip(pts, corners))
+    qtbot.waitUntil(lambda: not ws.is_busy(), timeout=5000)
+    # without an earlier region, Escape leaves nothing drawn
+    s.set_region(None)
+    qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=view.mapFromScene(QPointF(x0, y0)))
+    assert view._region.isVisible()
+    qtbot.keyClick(view, Qt.Key.Key_Escape)
+    assert not view._region.isVisible() and s.region is None
+    ws.region_panel.set_tool(None)
+
+
 # ---------------------------------------------------------------------- save the view as PNG
 @pytest.mark.parametrize("key", ["side-by-side", "3d"])
 def test_save_view_as_png(registered_workspace, qtbot, tmp_path, key, monkeypatch):
