@@ -698,7 +698,7 @@ class RegistrationWorkspace(QWidget):
     # ------------------------------------------------------------------ interaction
     def _tab_changed(self, _i: int) -> None:
         if self.tabs.currentWidget() is self.cloud_view:
-            self.cloud_view.render_now()
+            self.cloud_view.show_staged()  # over several event-loop turns: no stall
 
     # ------------------------------------------------------------------ save the view
     def _ask_save_view(self) -> None:
