@@ -364,3 +364,57 @@ def test_first_show_of_the_3d_tab_is_staged_and_complete(registered_workspace, q
     assert cv.building
     qtbot.waitUntil(lambda: not cv.building, timeout=30000)
     assert cv._poly.n_points == n and cv._mesh_actors["object mesh"].GetVisibility()
+
+
+def test_wizard_frusta_view_is_drawn_in_stages(qapp, qtbot, no_qt_leaks):
+    """Page 5's 3D view (frusta of the demo rig, 20 board poses): drawn over several event-loop
+    turns, complete at the end (a frustum per camera, one boards actor, legend, axes). Tolerance as
+    in the test above. (Before: 361 ms on the idle machine, 567 ms at a load of 4.6.)"""
+    import os
+
+    from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+
+    from plantreg_gui.core.synthetic.demo import demo_rig
+    from plantreg_gui.gui.calibration.frusta_view import FrustaView
+    from plantreg_gui.gui.stall_probe import StallProbe
+
+    rig = demo_rig()
+    rng = np.random.default_rng(1)
+    sq = np.array([[-0.1, -0.07, 0], [0.1, -0.07, 0], [0.1, 0.07, 0], [-0.1, 0.07, 0]])
+    boards = [sq + [rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), rng.uniform(0.5, 0.8)] for _ in range(20)]
+    top = QWidget()
+    lay = QVBoxLayout(top)
+    lay.addWidget(QLabel("page 5"))
+    view = FrustaView()
+    view.hide()
+    lay.addWidget(view, 1)
+    top.resize(1200, 800)
+    top.show()
+    qtbot.waitExposed(top)
+    try:
+        view.set_scene(list(rig.cameras), boards)
+        assert view.plotter is None  # drawn when shown
+        load = os.getloadavg()[0] / (os.cpu_count() or 1)
+        limit = 0.2 * max(1.0, load)
+        with StallProbe(trace_after_s=0.15) as probe:
+            view.show()
+            qtbot.waitUntil(lambda: view.n_frusta == len(rig.cameras) and not view.building, timeout=30000)
+            qtbot.wait(200)
+        print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms at load {load:.1f})")
+        assert probe.max_gap < limit, "\n\n".join(probe.traces)
+        assert view.error is None and view.n_boards == 20
+        assert len(view.plotter.renderer.actors) >= 1 + len(rig.cameras)  # boards, frusta (+ legend)
+        assert view.plotter.legend is not None and view._axes
+        img = np.asarray(view.plotter.screenshot(return_img=True))[..., :3].astype(int)
+        # every camera's colour is drawn (frusta and legend)
+        from plantreg_gui.gui.calibration.widgets import camera_colour
+        from PySide6.QtGui import QColor
+
+        for i in range(len(rig.cameras)):
+            c = QColor(camera_colour(i))
+            near = np.abs(img - [c.red(), c.green(), c.blue()]).sum(axis=2) < 40
+            assert near.sum() > 50, rig.cameras[i].name
+    finally:
+        view.close_plotter()
+        top.close()
+        top.deleteLater()

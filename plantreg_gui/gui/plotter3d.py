@@ -15,7 +15,8 @@ GUI thread only (pyvistaqt: the render window is touched only there).
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
 
 from PySide6.QtCore import QObject, QTimer
 from PySide6.QtWidgets import QWidget
@@ -39,6 +40,19 @@ def repaint(plotter: Any) -> None:
     ``plotter.render()`` renders now *and* again when the widget repaints)."""
     if plotter is not None:
         plotter.interactor.update()
+
+
+@contextmanager
+def changing(plotter: Any) -> Iterator[Any]:
+    """Change ``plotter``'s scene without rendering (pyvista renders after many calls, e.g.
+    ``Plotter.reset_camera`` even when told ``render=False``), then :func:`repaint` once."""
+    old = plotter.suppress_rendering
+    plotter.suppress_rendering = True
+    try:
+        yield plotter
+    finally:
+        plotter.suppress_rendering = old
+        repaint(plotter)
 
 
 class Stages(QObject):
