@@ -249,6 +249,43 @@ def test_absolute_limits_are_drawn_and_locked_across_recordings(registered_works
         other.deleteLater()
 
 
+def test_switching_to_absolute_limits_does_not_recompute_the_percentiles(registered_workspace, monkeypatch):
+    """Absolute limits start from the limits the percentiles gave -- the colour bar's, remembered,
+    not computed again -- and a cube kept as a HitImage (4K cubes) is never expanded to a dense
+    array for them. Truth: numpy percentiles of the layer's finite values."""
+    from plantreg_gui.core import display
+    from plantreg_gui.core.hits import HitImage
+
+    ws = registered_workspace
+    s = ws.session
+    c = ws.controls
+    _choose_layer(ws, "thermal")
+    L = s.layer("thermal")
+    pct = s.settings_for("thermal").percentiles
+    _, bar, _ = s.colour_bar(L)  # drawn with the registered image
+    truth = np.percentile(L.data[np.isfinite(L.data)], pct)
+    assert bar == pytest.approx(truth, rel=1e-6)
+    calls = []
+    real = display.auto_limits
+    monkeypatch.setattr(display, "auto_limits", lambda *a, **k: calls.append(a) or real(*a, **k))
+    c.limit_mode.setCurrentIndex(c.limit_mode.findData("absolute"))
+    assert calls == []  # nothing recomputed
+    assert (c.lo.value(), c.hi.value()) == pytest.approx(truth, abs=0.006)  # the spin boxes' 2 decimals
+    c.limit_mode.setCurrentIndex(c.limit_mode.findData("percentiles"))
+    # a cube as the large-registration HitImage: its hit values only
+    cube = next(L for L in s.layers if L.bands > 3)
+    dense = np.asarray(cube.data)
+    flat = np.flatnonzero(np.isfinite(dense).all(axis=2).ravel())
+    cube.data = HitImage(flat, dense.reshape(-1, cube.bands)[flat], dense.shape)
+    monkeypatch.setattr(HitImage, "dense", lambda self: pytest.fail("the cube was expanded"))
+    _choose_layer(ws, cube.name)
+    c.limit_mode.setCurrentIndex(c.limit_mode.findData("absolute"))
+    v = dense[np.isfinite(dense)]
+    lo, hi = np.percentile(v, s.settings_for(cube.name).percentiles)
+    assert c.lo.value() == pytest.approx(lo, abs=0.006) and c.hi.value() == pytest.approx(hi, abs=0.006)
+    c.limit_mode.setCurrentIndex(c.limit_mode.findData("percentiles"))
+
+
 def test_band_pickers_in_nm(registered_workspace, qtbot):
     ws = registered_workspace
     s = ws.session

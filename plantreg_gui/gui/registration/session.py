@@ -602,10 +602,8 @@ class RegistrationSession:
         (None, None, '') for colour and multi-band images (no colour bar)."""
         if L.bands != 1:
             return None, None, ""
-        from ...core import display
-
         st = self.settings_for(L.name)
-        lim = st.limits if st.limits is not None else display.auto_limits(L.data, st.percentiles)
+        lim = st.limits if st.limits is not None else L.percentile_limits(st.percentiles)
         return st.cmap or modality.default_cmap(L.modality), lim, L.unit
 
     def layer_title(self, L: Layer, raw: bool = False) -> str:
