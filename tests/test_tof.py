@@ -17,6 +17,7 @@ from plantreg_gui.core.register import CASE_P1, CASE_P2, CASE_P32, RegistrationP
 from plantreg_gui.core.synthetic import (
     MAT_LEAF0, demo_rig, ground_truth, make_plant_scene, render_depth, render_recording,
 )
+from plantreg_gui.core.synthetic.render import observable_views
 
 SEED = 0
 SEEDS = (0, 1, 3, 4)
@@ -183,6 +184,12 @@ def _figures(rig, res, gt, src):
     return figures(rig, res, gt, src)
 
 
+def _in_roi(rig, gt):
+    from test_register import in_roi
+
+    return in_roi(rig, gt)
+
+
 def test_realistic_depth_has_the_artefacts(realistic):
     rig, scene, rec, gt = realistic
     true = render_depth(rig, scene).astype(np.float64)
@@ -206,17 +213,23 @@ def test_realistic_scene_meets_the_issue_figures(seeded):
     noisy = render_depth(rig, scene, (0.001, 0.001), np.random.default_rng([seed, 0]))
     noisy[rec.depth == 0] = 0
     ref = register(rig, Recording(None, noisy, {}), "ir")
-    # exact depth, no artefacts: what the method reaches at best (its P3.2 caution, section 7)
-    ideal = register(rig, Recording(None, render_depth(rig, scene), {}), "ir")
+    # the truly matchable pixels whose view of the source lies in space the depth camera observes:
+    # the most that any registration from depth alone can certify (docs/registration.md section 9)
+    observable = observable_views(rig, scene, gt)
     for src in res.cases:
         f = _figures(rig, res, gt, src)
         r = _figures(rig, ref, gt, src)
-        i = _figures(rig, ideal, gt, src)
-        msg = f"seed {seed} {src}: {f} (clean depth, same noise: {r}; exact depth: {i})"
+        match = gt.matchable[src] & _in_roi(rig, gt)
+        obs = observable[src] & match
+        bound = obs.sum() / match.sum()
+        cov_obs = ((res.cases[src] == CASE_P1) & obs).sum() / obs.sum()
+        msg = f"seed {seed} {src}: {f} (clean depth, same noise: {r}; observable {bound:.4f}, P1 of them {cov_obs:.4f})"
         assert f["n_occluded"] > 1000, msg
         assert f["median"] <= 0.2 and f["p90"] <= 0.6, msg
-        # >= 95 % where exact depth reaches it; else no more than a point below exact depth
-        assert f["p1_coverage"] >= min(0.95, i["p1_coverage"] - 0.01), msg
+        # P1 misses at most 1.5 % of the pixels whose view the depth camera observes; so the issue's
+        # 95 % holds wherever the depth camera observes enough views (seeds 3 and 5: it does not)
+        assert cov_obs >= 0.985, msg
+        assert f["p1_coverage"] >= min(0.95, 0.985 * bound), msg
         assert f["p1_visible"] >= 0.997, msg
         assert f["occluded_p2_p32"] >= 0.90, msg
         assert f["occluded_p2_p32"] >= r["occluded_p2_p32"] - 0.02, msg
