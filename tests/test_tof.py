@@ -3,7 +3,9 @@
 Ground truth comes from the synthetic generator (true mesh, exact visibility). The method's
 thresholds were developed on scene seed 5, hole filling on seeds 1 and 5; the issue's figures are
 asserted on seeds 0, 1, 3 and 4 (0, 3 and 4 were not looked at while developing; 1 is where the
-occlusion recall fell short before hole filling).
+occlusion recall fell short before hole filling). P1 coverage is also measured against what the depth
+camera can observe (``observable_views``): its 98.5 % was chosen on seeds 0, 3 and 5 and checked on
+seeds 8-13 (seed 11, the lowest, is asserted).
 """
 
 import json
@@ -234,6 +236,25 @@ def test_realistic_scene_meets_the_issue_figures(seeded):
         assert f["occluded_p2_p32"] >= 0.90, msg
         assert f["occluded_p2_p32"] >= r["occluded_p2_p32"] - 0.02, msg
         assert f["p1_coverage"] >= r["p1_coverage"] - 0.01, msg
+
+
+@pytest.mark.parametrize("seed", [5, 11])
+def test_p1_covers_the_views_the_depth_camera_observes(seed):
+    """Scenes where the issue's 95 % is out of reach (seed 5: 94.0-94.2 % of the truly matchable
+    pixels have a view the depth camera observes; seed 11, not looked at while choosing 98.5 %:
+    91.8-92.5 %): P1 still covers nearly all of what depth can certify, and stays right."""
+    rig, scene, rec, gt = _realistic(seed)
+    res = register(rig, rec, "ir")
+    observable = observable_views(rig, scene, gt)
+    for src in ("thermal", "hyperspectral"):
+        f = _figures(rig, res, gt, src)
+        match = gt.matchable[src] & _in_roi(rig, gt)
+        obs = observable[src] & match
+        cov_obs = ((res.cases[src] == CASE_P1) & obs).sum() / obs.sum()
+        msg = f"seed {seed} {src}: {f}; observable {obs.sum() / match.sum():.4f}, P1 of them {cov_obs:.4f}"
+        assert obs.sum() / match.sum() < 0.95, msg  # the scene is one where 95 % cannot be reached
+        assert cov_obs >= 0.985, msg  # measured 0.9918-0.9952 (seed 5), 0.9872-0.9879 (seed 11)
+        assert f["p1_visible"] >= 0.997, msg
 
 
 def test_without_the_clean_up_the_problem_shows(realistic, realistic_ir):
