@@ -5,6 +5,10 @@ Ground truth: the synthetic demo scenes stand on a ground plane at z = GROUND_Z 
 depth camera's frame; the plant (pot, soil, stems, leaves) lies in front of it. A calibration
 board's box -- what the wizard's old "Fit ROI to this depth map" produced on a board pose --
 puts the ground plane at 0.56 m and keeps about one leaf.
+
+Real truth: the six Plant3DImageReg plants stand in a tray among frames and cables; the shipped
+rig's hand-set ROI keeps every plant whole (looked at) and drops the tray, the floor and the
+surroundings -- most of the measured depth. That must not warn.
 """
 
 from __future__ import annotations
@@ -50,6 +54,36 @@ def test_fit_roi_from_a_plant_depth_map_keeps_the_plant_and_drops_the_ground(whi
     frac, n = cut_fraction(X, *BOARD_ROI)
     assert frac > 0.5 and n > 1000
     assert "leaves out" in cut_warning(X, *BOARD_ROI)
+
+
+PLANTS = ["01grapevine", "02leopard_lily", "03areca_palm", "04philodendron", "05boston_fern", "06weeping_fig"]
+
+
+def test_the_real_plants_roi_warns_only_when_it_cuts_the_plant(shared_data):
+    from pathlib import Path
+
+    from plantreg_gui.core.depth import to_metres
+    from plantreg_gui.core.register import pixel_rays_cam
+    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.roi import cut_warning
+
+    rig = Rig.load(Path(__file__).resolve().parents[1] / "resources" / "plant3dimagereg" / "rig.json")
+    cam = rig.depth()
+    rays = pixel_rays_cam(cam)
+    for plant in PLANTS:
+        d = np.load(shared_data / "plant3dimagereg" / "lidar_depthmap_np" / f"{plant}.npy")
+        X = cam.to_rig(rays * to_metres(d, rig.depth_scale).reshape(-1, 1))
+        assert cut_warning(X, rig.roi_min, rig.roi_max) is None, plant
+        # the same box with its ground plane among the top leaves (what a board's box did): 3 % of
+        # the measured depth lies in front of it, the rest of the plant behind
+        hi = rig.roi_max.copy()
+        hi[2] = np.nanpercentile(X[:, 2], 3)
+        w = cut_warning(X, rig.roi_min, hi)
+        assert w is not None and "leaves out" in w, plant
+        # a box that keeps only the left third of the view cuts the plant sideways
+        hi = rig.roi_max.copy()
+        hi[0] = np.nanpercentile(X[:, 0], 33)
+        assert cut_warning(X, rig.roi_min, hi) is not None, plant
 
 
 def test_registration_warns_when_the_roi_cuts_off_most_of_the_plant(demo_dir, tmp_path):

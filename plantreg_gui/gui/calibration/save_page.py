@@ -410,7 +410,7 @@ class SavePage(WizardPage):
         if src is not None and src[0] == "plant":
             frac, n = cut_fraction(X, lo, hi)  # the same test as registration's warning
             if n >= 100 and frac > CUT_WARN_FRACTION:
-                set_banner(self.roi_msg, f"⚠ The ROI leaves out {100 * frac:.0f} % of the plant's measured scene: "
+                set_banner(self.roi_msg, f"⚠ The ROI leaves out {100 * frac:.0f} % of the plant's top (the nearest depth mid-view): "
                                          "the registration would keep only part of the plant. 'Fit ROI to the "
                                          "plant' or widen it.", error=True)
             elif "⚠" in self.roi_msg.text():

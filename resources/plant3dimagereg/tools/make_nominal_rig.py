@@ -23,11 +23,12 @@ Sources (no calibration ships with the data set):
 * Translations: a rough placement only, from a coarse silhouette alignment of the grapevine
   (see README): the camera offset (t_z = 0) that makes the plant's centroid (at its median depth) land where the
   silhouettes put it, with the nominal rotation. fit-rig refines them.
-* ROI: x in [-0.50, 0.36], y in [-0.60, 0.26], z in [0.30, 1.15] m (rig = depth camera frame).
-  The tray under the plants is tilted ~16 deg in the depth camera frame (z 1.01 m at the image top,
-  1.24 m at the bottom); max z = 1.15 keeps the pots and the lowest leaves (areca palm and
-  philodendron reach 1.05-1.12 m) and cuts the tray near and below the plants; part of the far
-  (upper) tray stays inside the box. A box cannot follow a tilted ground.
+* ROI: x in [-0.425, 0.275], y in [-0.525, 0.175], z in [0.30, 1.15] m (rig = depth camera frame).
+  The plants stand in a tray: its rim's top at z 1.00-1.07 m, its inner edges at x = -0.435 / +0.284
+  and y = -0.536 / +0.186 m; its floor at z 1.18-1.24 m; frames and cables lie around it. x and y
+  end 1 cm inside the rim, so the rim, frames and cables drop out while every leaf (all higher than
+  the rim, 0.45-0.95 m) stays in; max z = 1.15 keeps the pots and the lowest leaves (areca palm and
+  philodendron reach 1.05-1.12 m) and cuts the tray's floor.
 
   python resources/plant3dimagereg/tools/make_nominal_rig.py
 """
@@ -67,7 +68,7 @@ def main() -> None:
          "band_names": ["render R", "render G", "render B"], "wavelength_range_nm": [400, 1000]},
     ]
     rig = {"format": "plantreg.rig", "version": 1, "depth": {"camera": "ir", "scale": 0.001},
-           "roi": {"min": [-0.50, -0.60, 0.30], "max": [0.36, 0.26, 1.15]}, "cameras": cams,
+           "roi": {"min": [-0.425, -0.525, 0.30], "max": [0.275, 0.175, 1.15]}, "cameras": cams,
            "calibration": {"method": "nominal", "source": "resources/plant3dimagereg/tools/make_nominal_rig.py "
                            "(datasheet fields of view, typical Azure Kinect NFOV lens, rough placement)"}}
     OUT.write_text(json.dumps(rig, indent=2) + "\n")
