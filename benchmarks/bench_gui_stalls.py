@@ -153,6 +153,18 @@ def _ws_switch_views(ctx: Context) -> None:
         ctx.wait(lambda: time.monotonic() - t > 0.2)
 
 
+def _ws_fresh_registered(ctx: Context) -> None:
+    """A new workspace showing a registration: its 3D tab has never been shown."""
+    ctx.workspace(fresh=True)
+    _ws_registered(ctx)
+    ctx.workspace().set_view("side-by-side")
+
+
+def _ws_3d_shown(ctx: Context) -> bool:
+    cv = ctx.workspace().cloud_view
+    return cv.plotter is not None and not cv.building  # the staged build is complete
+
+
 SCENARIOS: list[Scenario] = [
     Scenario("workspace: open rig + recording", _ws_open_setup, _ws_open_run, _ws_idle),
     Scenario("workspace: register (meshes built)", _ws_open, lambda ctx: _ws_register_run(ctx, "ir"), _ws_idle),
@@ -160,6 +172,8 @@ SCENARIOS: list[Scenario] = [
              _ws_idle),
     Scenario("workspace: export (all outputs)", _ws_registered, _ws_export_run, _ws_idle),
     Scenario("workspace: switch views", _ws_registered, _ws_switch_views, lambda ctx: True),
+    Scenario("workspace: first show of the 3D tab", _ws_fresh_registered,
+             lambda ctx: ctx.workspace().set_view("3d"), _ws_3d_shown),
     Scenario("workspace: Load demo (write, open, register)", _ws_load_demo_setup, _ws_load_demo_run, _ws_idle),
 ]
 

@@ -121,7 +121,9 @@ def bench_set(app, label: str, source: Path, trace: bool) -> list:
         _step(app, "open session + detect (page 2)", lambda: (w.open_session(folder, resume=False), w.go_to_page(2)),
               idle, trace, rows)
         _step(app, "calibrate (page 4)", lambda: w.go_to_page(4), idle, trace, rows)
-        _step(app, "error tables (page 5)", lambda: w.go_to_page(5), idle, trace, rows)
+        view3d = w.pages[4].view3d  # its scene is drawn in stages after the tables: wait for the last
+        _step(app, "error tables (page 5)", lambda: w.go_to_page(5), lambda: idle() and not view3d.building,
+              trace, rows)
         _step(app, "depth page (page 6)", lambda: w.go_to_page(6), idle, trace, rows)
         _step(app, "save page (page 7)", lambda: w.go_to_page(7), idle, trace, rows)
     finally:

@@ -124,6 +124,47 @@ def test_region_polygon_by_clicks(registered_workspace, qtbot):
     ws.region_panel.set_tool(None)
 
 
+def test_escape_cancels_the_polygon_being_drawn(registered_workspace, qtbot):
+    """Escape drops the corners clicked so far; the region drawn before stays (outline and
+    statistics), and the next clicks start a new polygon."""
+    from PySide6.QtCore import QPointF, Qt
+
+    ws = registered_workspace
+    s = ws.session
+    x0, y0, x1, y1 = s.home
+    s.set_region("rect", (x0, y0, (x0 + x1) / 2, (y0 + y1) / 2))
+    qtbot.waitUntil(lambda: s.region_stats is not None and not ws.is_busy(), timeout=5000)
+    before = s.region
+    ws.region_panel.set_tool("polygon")
+    view = ws.sbs_grid.views[s.result.target].view
+    shown = [(p.x(), p.y()) for p in view._region.polygon()]
+    assert len(shown) == 4
+    for c in [(x0, y0), (x1, y0), (x1, y1)]:
+        qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=view.mapFromScene(QPointF(*c)))
+    assert len(view._region.polygon()) == 4 and view._drawing  # 3 corners + the one following the mouse
+    qtbot.keyClick(view, Qt.Key.Key_Escape)
+    assert not view._drawing
+    assert [(p.x(), p.y()) for p in view._region.polygon()] == shown  # the earlier region again
+    assert s.region == before and s.region_stats is not None
+    assert view.draw_mode == "polygon"  # the tool stays: the next clicks start afresh
+    corners = [((x0 + x1) / 2, y0), (x1, (y0 + y1) / 2), (x1, y1)]
+    for c in corners:
+        qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=view.mapFromScene(QPointF(*c)))
+    qtbot.mouseDClick(view.viewport(), Qt.MouseButton.LeftButton, pos=view.mapFromScene(QPointF(*corners[-1])))
+    kind, pts = s.region
+    assert kind == "polygon" and len(pts) == 3  # none of the cancelled corners
+    scale = view.transform().m11()
+    assert all(abs(px - cx) <= 1.5 / scale + 1e-6 for (px, _), (cx, _) in zip(pts, corners))
+    qtbot.waitUntil(lambda: not ws.is_busy(), timeout=5000)
+    # without an earlier region, Escape leaves nothing drawn
+    s.set_region(None)
+    qtbot.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, pos=view.mapFromScene(QPointF(x0, y0)))
+    assert view._region.isVisible()
+    qtbot.keyClick(view, Qt.Key.Key_Escape)
+    assert not view._region.isVisible() and s.region is None
+    ws.region_panel.set_tool(None)
+
+
 # ---------------------------------------------------------------------- save the view as PNG
 @pytest.mark.parametrize("key", ["side-by-side", "3d"])
 def test_save_view_as_png(registered_workspace, qtbot, tmp_path, key, monkeypatch):
@@ -208,6 +249,43 @@ def test_absolute_limits_are_drawn_and_locked_across_recordings(registered_works
         other.deleteLater()
 
 
+def test_switching_to_absolute_limits_does_not_recompute_the_percentiles(registered_workspace, monkeypatch):
+    """Absolute limits start from the limits the percentiles gave -- the colour bar's, remembered,
+    not computed again -- and a cube kept as a HitImage (4K cubes) is never expanded to a dense
+    array for them. Truth: numpy percentiles of the layer's finite values."""
+    from plantreg_gui.core import display
+    from plantreg_gui.core.hits import HitImage
+
+    ws = registered_workspace
+    s = ws.session
+    c = ws.controls
+    _choose_layer(ws, "thermal")
+    L = s.layer("thermal")
+    pct = s.settings_for("thermal").percentiles
+    _, bar, _ = s.colour_bar(L)  # drawn with the registered image
+    truth = np.percentile(L.data[np.isfinite(L.data)], pct)
+    assert bar == pytest.approx(truth, rel=1e-6)
+    calls = []
+    real = display.auto_limits
+    monkeypatch.setattr(display, "auto_limits", lambda *a, **k: calls.append(a) or real(*a, **k))
+    c.limit_mode.setCurrentIndex(c.limit_mode.findData("absolute"))
+    assert calls == []  # nothing recomputed
+    assert (c.lo.value(), c.hi.value()) == pytest.approx(truth, abs=0.006)  # the spin boxes' 2 decimals
+    c.limit_mode.setCurrentIndex(c.limit_mode.findData("percentiles"))
+    # a cube as the large-registration HitImage: its hit values only
+    cube = next(L for L in s.layers if L.bands > 3)
+    dense = np.asarray(cube.data)
+    flat = np.flatnonzero(np.isfinite(dense).all(axis=2).ravel())
+    cube.data = HitImage(flat, dense.reshape(-1, cube.bands)[flat], dense.shape)
+    monkeypatch.setattr(HitImage, "dense", lambda self: pytest.fail("the cube was expanded"))
+    _choose_layer(ws, cube.name)
+    c.limit_mode.setCurrentIndex(c.limit_mode.findData("absolute"))
+    v = dense[np.isfinite(dense)]
+    lo, hi = np.percentile(v, s.settings_for(cube.name).percentiles)
+    assert c.lo.value() == pytest.approx(lo, abs=0.006) and c.hi.value() == pytest.approx(hi, abs=0.006)
+    c.limit_mode.setCurrentIndex(c.limit_mode.findData("percentiles"))
+
+
 def test_band_pickers_in_nm(registered_workspace, qtbot):
     ws = registered_workspace
     s = ws.session
@@ -250,7 +328,10 @@ def test_alias_removed_and_3d_view_without_auto_update():
     from plantreg_gui.gui.registration import cloud_view
 
     assert not hasattr(imageio, "atomic_path_suffixed")
-    assert "QtInteractor(self.host, auto_update=False)" in Path(cloud_view.__file__).read_text()
+    from plantreg_gui.gui import plotter3d
+
+    assert "make_plotter(self.host)" in Path(cloud_view.__file__).read_text()
+    assert "QtInteractor(parent, auto_update=False, multi_samples=0)" in Path(plotter3d.__file__).read_text()
 
 
 def test_region_statistics_keep_the_gui_thread_responsive(registered_workspace, qtbot):
@@ -275,3 +356,102 @@ def test_region_statistics_keep_the_gui_thread_responsive(registered_workspace, 
         qtbot.wait(100)
     print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms at load {load:.1f})")
     assert probe.max_gap < limit, "\n\n".join(probe.traces)
+
+
+def test_first_show_of_the_3d_tab_is_staged_and_complete(registered_workspace, qtbot):
+    """The 3D tab's first show (GL widget, scene, first frames with software OpenGL) is built over
+    several event-loop turns and ends with the whole scene: every point, both meshes, the axes.
+    Tolerance as in test_region_statistics_keep_the_gui_thread_responsive: 0.2 s times the load
+    per core when above 1. (Before: one 265-374 ms gap on the idle machine.)"""
+    import os
+
+    from plantreg_gui.gui.stall_probe import StallProbe
+
+    ws = registered_workspace
+    s = ws.session
+    cv = ws.cloud_view
+    assert cv.plotter is None  # created on first show
+    load = os.getloadavg()[0] / (os.cpu_count() or 1)
+    limit = 0.2 * max(1.0, load)
+    with StallProbe(trace_after_s=0.15) as probe:
+        ws.set_view("3d")
+        qtbot.waitUntil(lambda: cv.plotter is not None and not cv.building, timeout=30000)
+        qtbot.wait(200)  # the last stage's repaint
+    steps = [name for name, _ in cv._stages.timings]
+    print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms at load {load:.1f}); "
+          f"stages {cv._stages.timings}")
+    assert probe.max_gap < limit, "\n\n".join(probe.traces)
+    n = len(s.cloud.points)
+    assert n > cv.PREVIEW_POINTS  # so the first frame was a preview
+    assert steps == ["ensure_plotter", "show_gl_widget", "preview_cloud", "axes", "full_cloud", "meshes"]
+    assert cv._poly.n_points == n and cv._step == 1
+    assert set(cv._mesh_actors) == set(s.meshes) == {"object mesh", "uncertainty mesh"}
+    assert cv._axes
+    img = np.asarray(cv.plotter.screenshot(return_img=True))[..., :3].astype(int)
+    green = (img[..., 1] > img[..., 0] + 25) & (img[..., 1] > img[..., 2] + 25)  # the leaves (rgb colours)
+    assert green.mean() > 0.01, green.mean()
+    # the object mesh drawn on request covers more of the view than the points (translucent green)
+    cv.mesh_boxes["object mesh"].setChecked(True)
+    assert cv._mesh_actors["object mesh"].GetVisibility()
+    cv.render_now()  # (the toggle only asked for a repaint)
+    img2 = np.asarray(cv.plotter.screenshot(return_img=True))[..., :3].astype(int)
+    assert np.any(img2 != img)
+    # a new result while the tab is shown: rebuilt in stages again, full detail at the end
+    cv.set_cloud(s.cloud, s.meshes, default="thermal")
+    assert cv.building
+    qtbot.waitUntil(lambda: not cv.building, timeout=30000)
+    assert cv._poly.n_points == n and cv._mesh_actors["object mesh"].GetVisibility()
+
+
+def test_wizard_frusta_view_is_drawn_in_stages(qapp, qtbot, no_qt_leaks):
+    """Page 5's 3D view (frusta of the demo rig, 20 board poses): drawn over several event-loop
+    turns, complete at the end (a frustum per camera, one boards actor, legend, axes). Tolerance as
+    in the test above. (Before: 361 ms on the idle machine, 567 ms at a load of 4.6.)"""
+    import os
+
+    from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+
+    from plantreg_gui.core.synthetic.demo import demo_rig
+    from plantreg_gui.gui.calibration.frusta_view import FrustaView
+    from plantreg_gui.gui.stall_probe import StallProbe
+
+    rig = demo_rig()
+    rng = np.random.default_rng(1)
+    sq = np.array([[-0.1, -0.07, 0], [0.1, -0.07, 0], [0.1, 0.07, 0], [-0.1, 0.07, 0]])
+    boards = [sq + [rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), rng.uniform(0.5, 0.8)] for _ in range(20)]
+    top = QWidget()
+    lay = QVBoxLayout(top)
+    lay.addWidget(QLabel("page 5"))
+    view = FrustaView()
+    view.hide()
+    lay.addWidget(view, 1)
+    top.resize(1200, 800)
+    top.show()
+    qtbot.waitExposed(top)
+    try:
+        view.set_scene(list(rig.cameras), boards)
+        assert view.plotter is None  # drawn when shown
+        load = os.getloadavg()[0] / (os.cpu_count() or 1)
+        limit = 0.2 * max(1.0, load)
+        with StallProbe(trace_after_s=0.15) as probe:
+            view.show()
+            qtbot.waitUntil(lambda: view.n_frusta == len(rig.cameras) and not view.building, timeout=30000)
+            qtbot.wait(200)
+        print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms at load {load:.1f})")
+        assert probe.max_gap < limit, "\n\n".join(probe.traces)
+        assert view.error is None and view.n_boards == 20
+        assert len(view.plotter.renderer.actors) >= 1 + len(rig.cameras)  # boards, frusta (+ legend)
+        assert view.plotter.legend is not None and view._axes
+        img = np.asarray(view.plotter.screenshot(return_img=True))[..., :3].astype(int)
+        # every camera's colour is drawn (frusta and legend)
+        from plantreg_gui.gui.calibration.widgets import camera_colour
+        from PySide6.QtGui import QColor
+
+        for i in range(len(rig.cameras)):
+            c = QColor(camera_colour(i))
+            near = np.abs(img - [c.red(), c.green(), c.blue()]).sum(axis=2) < 40
+            assert near.sum() > 50, rig.cameras[i].name
+    finally:
+        view.close_plotter()
+        top.close()
+        top.deleteLater()

@@ -272,7 +272,7 @@ def test_mask_overlays_and_legend_counts(ws):
 def test_cloud_view_colours_and_picking(ws, qapp):
     r = ws.result
     ws.set_view("3d")
-    _wait(qapp, lambda: ws.cloud_view.plotter is not None, 30)
+    _wait(qapp, lambda: ws.cloud_view.plotter is not None and not ws.cloud_view.building, 30)  # staged build
     cv = ws.cloud_view
     ok = np.all(np.isfinite(r.points_rig), axis=2)
     assert cv._poly is not None and cv._poly.n_points == int(ok.sum())
@@ -462,7 +462,7 @@ def test_plant3d_opens_in_the_workspace_with_a_banner(qapp, shared_data):
         assert (f"{float(d):.1f} mm" if d > 0 else "—") in w.readout.text()
         assert len(w.cloud.points) == int((w.plant.images["depth"] > 0).sum())
         w.set_view("3d")
-        _wait(qapp, lambda: w.cloud_view._poly is not None, 30)
+        _wait(qapp, lambda: w.cloud_view._poly is not None and not w.cloud_view.building, 30)
         assert w.cloud_view._poly.n_points == len(w.cloud.points)
     finally:
         w.shutdown()

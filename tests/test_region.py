@@ -81,3 +81,64 @@ def test_empty_selection_gives_nan_not_an_error():
     s = region_stats(res, region_mask(res.shape, rect=(0, 0, 3, 3)), "thermal")  # background corner
     assert s.trusted == 0 and np.isnan(s.mean).all() and s.cases["P6"][0] == 9
     assert ",mean,P1 not mixed,,,," in stats_csv([s])
+
+
+def _cube_result(seed=3):
+    """A hand-made result: a 40 x 50 target whose 'hs' source is a 7-band HitImage with random
+    values and a few NaN bands, P1 everywhere except a known block; truth from the arrays."""
+    from types import SimpleNamespace
+
+    H, W, B = 40, 50, 7
+    rng = np.random.default_rng(seed)
+    cube = (100.0 + 10.0 * rng.standard_normal((H, W, B))).astype(np.float32)
+    cube[rng.random((H, W)) < 0.1, rng.integers(0, B)] = np.nan  # pixels with one band not finite
+    hit = rng.random((H, W)) < 0.8
+    flat = np.flatnonzero(hit.ravel())
+    codes = np.ones((H, W), np.uint8)
+    codes[30:, :10] = 2  # P2: not trusted
+    mixed = np.zeros((H, W), bool)
+    mixed[::7, ::3] = True
+    res = SimpleNamespace(shape=(H, W), registered={"hs": HitImage(flat, cube.reshape(-1, B)[flat], (H, W, B))},
+                          cases={"hs": codes}, mixed={"hs": mixed}, points_rig=np.zeros((H, W, 3), np.float32))
+    return res, cube, hit, codes, mixed
+
+
+@pytest.mark.parametrize("chunk", [5, 64, 1 << 22])  # one band / a few pixels at a time .. all at once
+def test_chunked_cube_statistics_match_the_arrays(monkeypatch, chunk):
+    from plantreg_gui.core import region
+
+    monkeypatch.setattr(region, "CHUNK", chunk)
+    res, cube, hit, codes, mixed = _cube_result()
+    mask = region_mask(res.shape, polygon=[(3, 2), (47, 5), (40, 38), (2, 35)])
+    s = region_stats(res, mask, "hs")
+    trusted = mask & hit & (codes == 1) & ~mixed & np.isfinite(cube).all(axis=2)
+    v = cube[trusted].astype(np.float64)  # (n, B)
+    assert s.trusted == trusted.sum() > 500 and s.pixels == mask.sum()
+    assert s.mixed == (mask & (codes == 1) & mixed).sum()
+    assert np.allclose(s.mean, v.mean(axis=0), atol=1e-4)
+    assert np.allclose(s.std, v.std(axis=0), atol=1e-4)
+    assert np.allclose(s.median, np.median(v, axis=0), atol=1e-5)
+
+
+def test_statistics_are_cancellable_between_chunks(monkeypatch):
+    from plantreg_gui.core import region
+    from plantreg_gui.core.errors import Cancelled
+    from plantreg_gui.core.progress import CancelToken, Reporter
+
+    monkeypatch.setattr(region, "CHUNK", 64)  # many chunks
+    res, *_ = _cube_result()
+    mask = np.ones(res.shape, bool)
+    calls = []
+    token = CancelToken()
+
+    def cb(f, msg):
+        calls.append(f)
+        if len(calls) == 4:  # the user presses Cancel while the values are being read
+            token.cancel()
+
+    with pytest.raises(Cancelled):
+        region_stats(res, mask, "hs", progress=Reporter(cb, token))
+    assert len(calls) == 4  # stopped at the next chunk, not at the end
+    full = []
+    region_stats(res, mask, "hs", progress=Reporter(lambda f, m: full.append(f)))
+    assert len(full) > 10 and full == sorted(full) and full[-1] == 1.0

@@ -3,7 +3,9 @@
 Ground truth comes from the synthetic generator (true mesh, exact visibility). The method's
 thresholds were developed on scene seed 5, hole filling on seeds 1 and 5; the issue's figures are
 asserted on seeds 0, 1, 3 and 4 (0, 3 and 4 were not looked at while developing; 1 is where the
-occlusion recall fell short before hole filling).
+occlusion recall fell short before hole filling). P1 coverage is also measured against what the depth
+camera can observe (``observable_views``): its 98.5 % was chosen on seeds 0, 3 and 5 and checked on
+seeds 8-13 (seed 11, the lowest, is asserted).
 """
 
 import json
@@ -17,6 +19,7 @@ from plantreg_gui.core.register import CASE_P1, CASE_P2, CASE_P32, RegistrationP
 from plantreg_gui.core.synthetic import (
     MAT_LEAF0, demo_rig, ground_truth, make_plant_scene, render_depth, render_recording,
 )
+from plantreg_gui.core.synthetic.render import observable_views
 
 SEED = 0
 SEEDS = (0, 1, 3, 4)
@@ -183,6 +186,12 @@ def _figures(rig, res, gt, src):
     return figures(rig, res, gt, src)
 
 
+def _in_roi(rig, gt):
+    from test_register import in_roi
+
+    return in_roi(rig, gt)
+
+
 def test_realistic_depth_has_the_artefacts(realistic):
     rig, scene, rec, gt = realistic
     true = render_depth(rig, scene).astype(np.float64)
@@ -206,21 +215,46 @@ def test_realistic_scene_meets_the_issue_figures(seeded):
     noisy = render_depth(rig, scene, (0.001, 0.001), np.random.default_rng([seed, 0]))
     noisy[rec.depth == 0] = 0
     ref = register(rig, Recording(None, noisy, {}), "ir")
-    # exact depth, no artefacts: what the method reaches at best (its P3.2 caution, section 7)
-    ideal = register(rig, Recording(None, render_depth(rig, scene), {}), "ir")
+    # the truly matchable pixels whose view of the source lies in space the depth camera observes:
+    # the most that any registration from depth alone can certify (docs/registration.md section 9)
+    observable = observable_views(rig, scene, gt)
     for src in res.cases:
         f = _figures(rig, res, gt, src)
         r = _figures(rig, ref, gt, src)
-        i = _figures(rig, ideal, gt, src)
-        msg = f"seed {seed} {src}: {f} (clean depth, same noise: {r}; exact depth: {i})"
+        match = gt.matchable[src] & _in_roi(rig, gt)
+        obs = observable[src] & match
+        bound = obs.sum() / match.sum()
+        cov_obs = ((res.cases[src] == CASE_P1) & obs).sum() / obs.sum()
+        msg = f"seed {seed} {src}: {f} (clean depth, same noise: {r}; observable {bound:.4f}, P1 of them {cov_obs:.4f})"
         assert f["n_occluded"] > 1000, msg
         assert f["median"] <= 0.2 and f["p90"] <= 0.6, msg
-        # >= 95 % where exact depth reaches it; else no more than a point below exact depth
-        assert f["p1_coverage"] >= min(0.95, i["p1_coverage"] - 0.01), msg
+        # P1 misses at most 1.5 % of the pixels whose view the depth camera observes; so the issue's
+        # 95 % holds wherever the depth camera observes enough views (seeds 3 and 5: it does not)
+        assert cov_obs >= 0.985, msg
+        assert f["p1_coverage"] >= min(0.95, 0.985 * bound), msg
         assert f["p1_visible"] >= 0.997, msg
         assert f["occluded_p2_p32"] >= 0.90, msg
         assert f["occluded_p2_p32"] >= r["occluded_p2_p32"] - 0.02, msg
         assert f["p1_coverage"] >= r["p1_coverage"] - 0.01, msg
+
+
+@pytest.mark.parametrize("seed", [5, 11])
+def test_p1_covers_the_views_the_depth_camera_observes(seed):
+    """Scenes where the issue's 95 % is out of reach (seed 5: 94.0-94.2 % of the truly matchable
+    pixels have a view the depth camera observes; seed 11, not looked at while choosing 98.5 %:
+    91.8-92.5 %): P1 still covers nearly all of what depth can certify, and stays right."""
+    rig, scene, rec, gt = _realistic(seed)
+    res = register(rig, rec, "ir")
+    observable = observable_views(rig, scene, gt)
+    for src in ("thermal", "hyperspectral"):
+        f = _figures(rig, res, gt, src)
+        match = gt.matchable[src] & _in_roi(rig, gt)
+        obs = observable[src] & match
+        cov_obs = ((res.cases[src] == CASE_P1) & obs).sum() / obs.sum()
+        msg = f"seed {seed} {src}: {f}; observable {obs.sum() / match.sum():.4f}, P1 of them {cov_obs:.4f}"
+        assert obs.sum() / match.sum() < 0.95, msg  # the scene is one where 95 % cannot be reached
+        assert cov_obs >= 0.985, msg  # measured 0.9918-0.9952 (seed 5), 0.9872-0.9879 (seed 11)
+        assert f["p1_visible"] >= 0.997, msg
 
 
 def test_without_the_clean_up_the_problem_shows(realistic, realistic_ir):

@@ -65,7 +65,15 @@ def _sample(values: np.ndarray, max_samples: int = _MAX_SAMPLES) -> np.ndarray:
 
 
 def _finite_values(img: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
-    """Finite values of ``img`` (H, W[, C]) under ``mask`` (H, W), flattened, subsampled."""
+    """Finite values of ``img`` (H, W[, C]) under ``mask`` (H, W), flattened, subsampled. A
+    :class:`~.hits.HitImage` without a mask is not expanded: its pixels without a hit are NaN
+    and would be dropped anyway, so its ``values`` (M, C) are the pixels."""
+    from .hits import HitImage
+
+    if isinstance(img, HitImage) and mask is None:
+        a = img.values
+        a = _sample(a, max(1, _MAX_SAMPLES // a.shape[1])).ravel()
+        return a[np.isfinite(a)]
     a = np.asarray(img)
     if mask is not None:
         a = a[np.asarray(mask, dtype=bool)]

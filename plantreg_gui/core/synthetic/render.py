@@ -419,3 +419,72 @@ def ground_truth(rig: Rig, scene: Scene, target: str, visibility_tol_m: float = 
         progress(0.3 + 0.7 * (i + 1) / len(sources), f"ground truth: {src.name}")
     progress(1.0, "ground truth")
     return gt
+
+
+def observable_views(rig: Rig, scene: Scene, gt: GroundTruth, tol_m: float = 0.002, step_m: float = 0.002,
+                     supersample: int = 4) -> dict[str, np.ndarray]:
+    """Which truly matchable pixels could *any* registration from this rig's depth alone certify?
+
+    Per source of ``gt`` (whose target is any camera), (H, W) bool: the pixel is matchable
+    (``gt.matchable``) and the whole segment from its true point to the source camera's centre
+    (beyond ``tol_m`` from the point) lies in space the depth camera observes, i.e. in front of
+    the first true surface along the depth camera's line of sight (within ``tol_m``). A point
+    whose view of the source passes through space hidden from the depth camera -- under a leaf,
+    behind a stem -- cannot be told from an occluded one by depth alone: this is the upper bound
+    on P1 coverage for a method that calls P1 only what the depth shows to be clear.
+
+    The depth camera is taken as ideal (exact, infinitely fine): a regular grid of its viewing
+    directions ``supersample`` times finer than its pixels is cast into the true scene once;
+    segment points every ``step_m`` are looked up at the nearest direction. Points outside its
+    field of view count as hidden. ``gt.points_rig`` are the true points.
+    """
+    dcam = rig.depth()
+    H, W = dcam.shape
+    border = np.concatenate([np.stack([np.arange(W), np.zeros(W)], 1), np.stack([np.arange(W), np.full(W, H - 1)], 1),
+                             np.stack([np.zeros(H), np.arange(H)], 1), np.stack([np.full(H, W - 1), np.arange(H)], 1)])
+    xy = dcam.undistort_normalized(border.astype(np.float64))
+    d = 1.0 / (dcam.K[0, 0] * supersample)
+    (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
+    xs, ys = np.arange(x0, x1 + d, d), np.arange(y0, y1 + d, d)
+    gx, gy = np.meshgrid(xs, ys)
+    dc = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)], axis=1)
+    norm = np.linalg.norm(dc, axis=1)
+    zmap = np.empty(len(dc))
+    for a in range(0, len(dc), 1 << 20):
+        dr = (dc[a:a + (1 << 20)] @ dcam.R_cam_rig) / norm[a:a + (1 << 20), None]  # rig-frame unit rays
+        t, _p, _b = scene.cast(dcam.center_rig, dr)
+        zmap[a:a + (1 << 20)] = t / norm[a:a + (1 << 20)]  # distance along the ray -> camera-frame z
+    zmap = zmap.reshape(gx.shape)
+    z_top = float(np.min(zmap)) - tol_m  # nothing is hidden in front of the nearest surface
+    out: dict[str, np.ndarray] = {}
+    for name, match in gt.matchable.items():
+        X = gt.points_rig[match].astype(np.float64)
+        S = rig.camera(name).center_rig
+        v = S - X
+        L = np.linalg.norm(v, axis=1)
+        u = v / L[:, None]
+        ok = np.ones(len(X), dtype=bool)
+        s = tol_m
+        while True:
+            act = np.flatnonzero(ok & (s < L))
+            if len(act) == 0:
+                break
+            Yc = dcam.to_cam(X[act] + u[act] * s)
+            z = Yc[:, 2]
+            near = z < z_top
+            with np.errstate(divide="ignore", invalid="ignore"):
+                i = np.rint((Yc[:, 1] / z - y0) / d)
+                j = np.rint((Yc[:, 0] / z - x0) / d)
+            inside = (z > 0) & (i >= 0) & (i < len(ys)) & (j >= 0) & (j < len(xs))
+            zs = np.full(len(act), -np.inf)
+            zs[inside] = zmap[i[inside].astype(np.int64), j[inside].astype(np.int64)]
+            hidden = ~near & (zs < z - tol_m)
+            ok[act[hidden]] = False
+            done = near & ~hidden
+            ok_act = act[done]  # above every surface: the rest of the segment is observed
+            L[ok_act] = 0.0
+            s += step_m
+        m = np.zeros(match.shape, dtype=bool)
+        m[match] = ok
+        out[name] = m
+    return out

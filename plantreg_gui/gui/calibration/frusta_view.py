@@ -1,7 +1,8 @@
 """3D view of the calibrated rig: camera frusta (one colour per camera, labelled) and board poses.
 
 The pyvistaqt plotter is created lazily (first time the page is shown) and only touched on the
-GUI thread; the wizard hands it plain arrays. For screenshots the rendered frame is copied
+GUI thread; the wizard hands it plain arrays. A scene is drawn in stages over several event-loop
+turns (``gui/plotter3d.py``). For screenshots the rendered frame is copied
 into a label on top of the OpenGL widget, because grabbing a native GL window gives black.
 """
 
@@ -11,6 +12,7 @@ import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QLabel, QStackedLayout, QWidget
 
+from ..plotter3d import Stages, changing, make_plotter
 from .widgets import camera_colour, qpixmap
 
 
@@ -46,6 +48,11 @@ class FrustaView(QWidget):
         self.error: str | None = None
         self.n_frusta = 0
         self.n_boards = 0
+        self._n = (0, 0)
+        self._labels: list[tuple[str, str]] = []
+        self._frusta: list = []
+        self._axes = False
+        self._stages = Stages(self)
 
     def _ensure_plotter(self) -> bool:
         if self.plotter is not None:
@@ -55,15 +62,13 @@ class FrustaView(QWidget):
         # constructing the GL widget processes events: a nested show must not build a second one
         self._creating = True
         try:
-            from pyvistaqt import QtInteractor
-
-            # no auto_update: pyvistaqt's default re-renders 5 times a second for ever, which with
-            # software OpenGL took most of the GUI thread; we render when the scene changes and
-            # the interactor renders while the user rotates or zooms
-            plotter = QtInteractor(self, auto_update=False)
+            plotter = make_plotter(self)
             plotter.set_background("#20242a")
+            # not the current widget yet (hidden): its first frame is drawn in a later event-loop turn
             self._stack.insertWidget(0, plotter.interactor)
+            self._stack.setCurrentWidget(self._placeholder)
             self.plotter = plotter
+            self._axes = False
         except Exception as e:  # no OpenGL: keep the page usable, say why the 3D view is missing
             self.error = f"3D view unavailable ({type(e).__name__}: {e})"
             self._placeholder.setText(self.error)
@@ -71,6 +76,10 @@ class FrustaView(QWidget):
         finally:
             self._creating = False
         return True
+
+    @property
+    def building(self) -> bool:
+        return self._stages.running
 
     def set_scene(self, cameras: list, boards: list[np.ndarray], depth: float | None = None) -> None:
         """``cameras`` core Cameras (rig frame); ``boards`` (4, 3) rig-frame outlines of board poses."""
@@ -85,43 +94,75 @@ class FrustaView(QWidget):
             self._draw()
 
     def _draw(self) -> None:
-        if self._scene is None or not self._ensure_plotter():
+        """Draw the pending scene over several event-loop turns (plotter3d.Stages: with software
+        OpenGL the plotter, its first frame and the first frame of each kind of actor each take
+        ~100 ms): the plotter (hidden), its first frame, boards and frusta, legend and axes."""
+        if self._scene is None:
             return
+
+        def plotter() -> None:
+            if not self._ensure_plotter():
+                self._stages.cancel()
+
+        def first_frame() -> None:
+            self._stack.setCurrentWidget(self.plotter.interactor)
+
+        steps = [] if self.plotter is not None else [plotter]
+        if self.plotter is None or self._stack.currentWidget() is not self.plotter.interactor:
+            steps.append(first_frame)
+        self._stages.start(steps + [self._draw_scene, self._draw_frusta, self._draw_legend, self._draw_axes])
+
+    def _draw_scene(self) -> None:
+        """The board poses and the camera placed (the frusta follow in the next turn: the first
+        frame of each kind of actor compiles its shaders)."""
         import pyvista as pv
 
+        if self._scene is None:
+            return
         cameras, boards, depth = self._scene
         self._scene = None  # drawn; redraw only on new data
-        p = self.plotter
-        p.clear()
         centres = np.array([c.center_rig for c in cameras]) if cameras else np.zeros((1, 3))
         if depth is None:
             dists = [float(np.linalg.norm(b.mean(axis=0) - centres.mean(axis=0))) for b in boards]
             depth = 0.4 * float(np.median(dists)) if dists else 0.15
-        if boards:  # one actor for all boards: each actor costs the first (software GL) render time
-            pts = np.concatenate([np.asarray(b, float) for b in boards])
-            faces = np.concatenate([[4, 4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 3] for i in range(len(boards))])
-            p.add_mesh(pv.PolyData(pts, faces=faces), color="#c8c8c8", opacity=0.35, show_edges=True,
-                       edge_color="#f0f0f0")
-        labels = []
-        for i, cam in enumerate(cameras):
-            pts, lines = frustum_lines(cam, depth)
-            poly = pv.PolyData(pts, lines=lines)
-            p.add_mesh(poly, color=camera_colour(i), line_width=3)
-            labels.append(cam.name)
-        if labels:
-            # a legend, not labels in the scene: the optical centres are centimetres apart
-            p.add_legend([[f"{n}", camera_colour(i)] for i, n in enumerate(labels)] + [["board poses", "#c8c8c8"]],
-                         bcolor="#2c313a", border=True, size=(0.22, 0.04 * (len(labels) + 1)), loc="upper right",
-                         face="rectangle")
-        p.add_axes()
-        # a side view of the rig (rig frame: z forward = down towards the ground): rig at the top,
-        # boards below it
-        p.view_vector((1.0, 0.45, -0.55), viewup=(0, 0, -1))
-        p.reset_camera()
-        self.n_frusta = len(cameras)
-        self.n_boards = len(boards)
-        self._stack.setCurrentWidget(self.plotter.interactor)
-        p.render()
+        self._frusta = [(frustum_lines(cam, depth), camera_colour(i)) for i, cam in enumerate(cameras)]
+        self._labels = [(cam.name, camera_colour(i)) for i, cam in enumerate(cameras)]
+        with changing(self.plotter) as p:
+            p.clear_actors()
+            p.remove_legend(render=False)
+            if boards:  # one actor for all boards: each actor costs the first (software GL) render time
+                pts = np.concatenate([np.asarray(b, float) for b in boards])
+                faces = np.concatenate([[4, 4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 3] for i in range(len(boards))])
+                p.add_mesh(pv.PolyData(pts, faces=faces), color="#c8c8c8", opacity=0.35, show_edges=True,
+                           edge_color="#f0f0f0", render=False)
+            # a side view of the rig (rig frame: z forward = down towards the ground): rig at the top,
+            # boards below it
+            p.renderer.view_vector((1.0, 0.45, -0.55), viewup=(0, 0, -1), render=False)
+            p.renderer.reset_camera(render=False)
+        self._n = (len(cameras), len(boards))
+
+    def _draw_frusta(self) -> None:
+        import pyvista as pv
+
+        with changing(self.plotter) as p:
+            for (pts, lines), colour in self._frusta:
+                p.add_mesh(pv.PolyData(pts, lines=lines), color=colour, line_width=3, render=False)
+            p.renderer.reset_camera(render=False)  # boards and frusta
+
+    def _draw_legend(self) -> None:
+        with changing(self.plotter) as p:
+            if self._labels:
+                # a legend, not labels in the scene: the optical centres are centimetres apart
+                p.add_legend([[n, c] for n, c in self._labels] + [["board poses", "#c8c8c8"]],
+                             bcolor="#2c313a", border=True, size=(0.22, 0.04 * (len(self._labels) + 1)),
+                             loc="upper right", face="rectangle")
+
+    def _draw_axes(self) -> None:
+        with changing(self.plotter) as p:
+            if not self._axes:
+                p.add_axes()
+                self._axes = True
+        self.n_frusta, self.n_boards = self._n  # the scene is complete
 
     def prepare_screenshot(self) -> None:
         """Copy the rendered frame into a label on top (native GL windows grab as black)."""
@@ -129,6 +170,7 @@ class FrustaView(QWidget):
             return
         if self._scene is not None:
             self._draw()
+        self._stages.finish()
         try:
             self.plotter.render()
             img = self.plotter.screenshot(return_img=True)
@@ -140,6 +182,7 @@ class FrustaView(QWidget):
         self._stack.setCurrentWidget(self._snapshot)
 
     def close_plotter(self) -> None:
+        self._stages.cancel()
         if self.plotter is not None:
             try:
                 self.plotter.close()

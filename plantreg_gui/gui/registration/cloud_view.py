@@ -2,7 +2,8 @@
 uncertainty meshes, and point picking that reads out every modality at the picked point.
 
 The plotter is created lazily (the first time the view is shown) and touched only on the GUI
-thread; workers hand over numpy arrays (:class:`~.model.Cloud`).
+thread; workers hand over numpy arrays (:class:`~.model.Cloud`). A new scene is built in stages
+over several event-loop turns (:meth:`CloudView.show_staged`, ``gui/plotter3d.py``).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from PySide6.QtWidgets import (
     QCheckBox, QComboBox, QHBoxLayout, QLabel, QSpinBox, QSplitter, QVBoxLayout, QWidget,
 )
 
+from ..plotter3d import Stages, make_plotter, repaint
 from .model import Cloud
 
 MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
@@ -25,6 +27,9 @@ class CloudView(QWidget):
         self.meshes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self.plotter = None
         self._poly = None
+        self._step = 1  # the cloud actor shows every _step-th point (> 1 while a staged build previews)
+        self._axes = False
+        self._stages = Stages(self)
         self._mesh_actors: dict[str, object] = {}
         self._tree = None
         self._dirty = False  # the scene needs rebuilding before the next render
@@ -101,28 +106,35 @@ class CloudView(QWidget):
         n = 0 if cloud is None else len(cloud.points)
         self.info.setText((note + "\n\n" if note else "") + f"{n:,} points." if cloud is not None else note)
         self._dirty = True
-        if self.plotter is not None and self.isVisible():
-            self.render_now()
+        if self.isVisible():
+            self.show_staged()
 
     # ------------------------------------------------------------------ plotter
+    # the first frame of a new scene shows every k-th point, at most this many (a quick first
+    # picture; the full cloud and the meshes follow in the next event-loop turns)
+    PREVIEW_POINTS = 20000
+
+    @property
+    def building(self) -> bool:
+        """A staged build (:meth:`show_staged`) is still adding parts of the scene."""
+        return self._stages.running
+
     def ensure_plotter(self) -> None:
         if self.plotter is not None or self._creating:
             return
-        from pyvistaqt import QtInteractor
-
         # constructing the GL widget processes events; a nested render request must not build a second one
         self._creating = True
         try:
-            # no auto_update (as frusta_view): pyvistaqt's default re-renders 5 times a second for
-            # ever; every change here calls render() itself and the interactor renders while rotating
-            plotter = QtInteractor(self.host, auto_update=False)
+            plotter = make_plotter(self.host)
         finally:
             self._creating = False
         self.plotter = plotter
-        self.placeholder.hide()
+        self._axes = False
+        # hidden until show_gl_widget: its first frame (GL set-up, ~100 ms with software GL) is
+        # then drawn in an event-loop turn of its own, not in this one
+        plotter.interactor.hide()
         self.host_layout.addWidget(self.plotter.interactor)
         self.plotter.set_background("#202428", top="#3a4450")
-        self.plotter.add_axes(color="white")  # orientation of the rig frame (x right, y down, z forward)
         try:
             self.plotter.enable_point_picking(callback=self._picked, show_message=False, left_clicking=True,
                                               show_point=True, color="red", point_size=12)
@@ -130,40 +142,108 @@ class CloudView(QWidget):
             self.plotter.enable_point_picking(callback=self._picked, show_message=False)
         self._dirty = True
 
+    def show_gl_widget(self) -> None:
+        if self.plotter is not None and self.plotter.interactor.isHidden():
+            self.placeholder.hide()
+            self.plotter.interactor.show()
+
     def render_now(self) -> None:
-        """Build the scene if needed and render (GUI thread only)."""
+        """Build the whole scene now, if needed, and render (GUI thread; before a screenshot)."""
         if self.cloud is None and not self.meshes:
             return
+        self._stages.finish()
         self.ensure_plotter()
         if self.plotter is None:
             return
+        self.show_gl_widget()
+        self._add_axes()
         if self._dirty:
             self._rebuild()
         self.plotter.render()
 
-    def _rebuild(self) -> None:
-        import pyvista as pv
+    def show_staged(self) -> None:
+        """Show the scene (the tab was shown, or a new cloud arrived while it is shown), built over
+        several event-loop turns so that the GUI thread never stalls: the plotter (its GL widget),
+        a preview of the cloud (every k-th point) and the camera, the orientation axes, the full
+        cloud, the meshes -- each step followed by a repaint (plotter3d.Stages)."""
+        if self.cloud is None and not self.meshes:
+            return
+        steps: list = []
+        if self.plotter is None:
+            steps.append(self.ensure_plotter)
+        if self.plotter is None or self.plotter.interactor.isHidden():
+            steps.append(self.show_gl_widget)  # its first frame: the background only
+        if self._dirty or self.plotter is None:
+            n = 0 if self.cloud is None else len(self.cloud.points)
+            k = max(1, -(-n // self.PREVIEW_POINTS))
 
-        p = self.plotter
-        p.clear_actors()  # (no render: render_now renders once, after the rebuild)
+            def preview_cloud() -> None:
+                self._begin_scene()
+                self._add_cloud(k)
+                self._place_camera()
+                repaint(self.plotter)
+
+            def axes() -> None:
+                self._add_axes()
+                repaint(self.plotter)
+
+            def full_cloud() -> None:
+                self._add_cloud(1)
+                repaint(self.plotter)
+
+            def meshes() -> None:
+                self._add_meshes()
+                self._dirty = False
+                repaint(self.plotter)
+
+            steps += [preview_cloud, axes] + ([full_cloud] if k > 1 else []) + [meshes]
+        else:
+            steps.append(lambda: repaint(self.plotter))
+        self._stages.start(steps)
+
+    def _add_axes(self) -> None:
+        if self.plotter is not None and not self._axes:
+            self.plotter.add_axes(color="white")  # orientation of the rig frame (x right, y down, z forward)
+            self._axes = True
+
+    def _rebuild(self) -> None:
+        self._begin_scene()
+        self._add_cloud(1)
+        self._add_meshes()
+        self._place_camera()
+        self._dirty = False
+
+    def _begin_scene(self) -> None:
+        self.plotter.clear_actors()  # (no render: the caller repaints once the scene is built)
         self._mesh_actors.clear()
         self._poly = None
-        if self.cloud is not None and len(self.cloud.points):
-            poly = pv.PolyData(np.asarray(self.cloud.points, dtype=np.float32))
-            poly.point_data["colour"] = self._colours()
-            self._poly = poly
-            p.add_mesh(poly, scalars="colour", rgb=True, point_size=self.point_size.value(),
-                       render_points_as_spheres=False, name="cloud", pickable=True, render=False)
+
+    def _add_cloud(self, step: int) -> None:
+        """The cloud actor with every ``step``-th point (1: all), replacing the previous one."""
+        import pyvista as pv
+
+        if self.cloud is None or not len(self.cloud.points):
+            return
+        poly = pv.PolyData(np.ascontiguousarray(self.cloud.points[::step], dtype=np.float32))
+        poly.point_data["colour"] = self._colours()[::step]
+        self._poly, self._step = poly, step
+        self.plotter.add_mesh(poly, scalars="colour", rgb=True, point_size=self.point_size.value(),
+                              render_points_as_spheres=False, name="cloud", pickable=True, render=False)
+
+    def _add_meshes(self) -> None:
+        import pyvista as pv
+
         for name, (verts, tris) in self.meshes.items():
             faces = np.hstack([np.full((len(tris), 1), 3, np.int64), np.asarray(tris, np.int64)]).ravel()
             mesh = pv.PolyData(np.asarray(verts, np.float32), faces)
-            actor = p.add_mesh(mesh, color=MESH_COLOURS[name], opacity=0.35, name=name, pickable=False,
-                               show_edges=False, render=False)
+            actor = self.plotter.add_mesh(mesh, color=MESH_COLOURS[name], opacity=0.35, name=name, pickable=False,
+                                          show_edges=False, render=False)
             actor.SetVisibility(self.mesh_boxes[name].isChecked())
             self._mesh_actors[name] = actor
+
+    def _place_camera(self) -> None:
         if not self._dirty_camera_kept():
             self._reset_camera()
-        self._dirty = False
 
     def _dirty_camera_kept(self) -> bool:
         return getattr(self, "_camera_set", False)
@@ -173,7 +253,7 @@ class CloudView(QWidget):
         y down and z towards the ground), so that the heights of leaves are visible."""
         pts = self.cloud.points if self.cloud is not None and len(self.cloud.points) else None
         if pts is None:
-            self.plotter.reset_camera(render=False)
+            self.plotter.renderer.reset_camera(render=False)  # (Plotter.reset_camera renders, whatever it is told)
             return
         c = np.nanmedian(pts, axis=0).astype(float)
         ext = float(np.nanmax(np.nanpercentile(pts, 98, axis=0) - np.nanpercentile(pts, 2, axis=0)))
@@ -182,7 +262,7 @@ class CloudView(QWidget):
         up = np.array([0.0, 0.0, -1.0])
         up -= d * (up @ d)
         self.plotter.camera_position = [tuple(c + d * 2.0 * max(ext, 0.05)), tuple(c), tuple(up / np.linalg.norm(up))]
-        self.plotter.reset_camera(render=False)  # keeps the direction, fits the whole cloud
+        self.plotter.renderer.reset_camera(render=False)  # keeps the direction, fits the whole cloud
         self.plotter.camera.zoom(1.15)
         self._camera_set = True
 
@@ -194,21 +274,20 @@ class CloudView(QWidget):
 
     def _recolour(self) -> None:
         if self._poly is not None:
-            self._poly.point_data["colour"] = self._colours()
-            self.plotter.render()
+            self._poly.point_data["colour"] = self._colours()[::self._step]
+            repaint(self.plotter)
 
     def _resize_points(self, v: int) -> None:
         if self.plotter is not None and self._poly is not None:
             actor = self.plotter.actors.get("cloud")
             if actor is not None:
                 actor.GetProperty().SetPointSize(v)
-                self.plotter.render()
+                repaint(self.plotter)
 
     def _mesh_toggled(self) -> None:
         for name, actor in self._mesh_actors.items():
             actor.SetVisibility(self.mesh_boxes[name].isChecked())
-        if self.plotter is not None:
-            self.plotter.render()
+        repaint(self.plotter)
 
     # ------------------------------------------------------------------ picking
     def _picked(self, point) -> None:
@@ -271,6 +350,7 @@ class CloudView(QWidget):
 
     # ------------------------------------------------------------------ teardown
     def close_plotter(self) -> None:
+        self._stages.cancel()
         if self.plotter is not None:
             try:
                 self.plotter.close()

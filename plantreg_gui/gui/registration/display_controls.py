@@ -13,7 +13,7 @@ from PySide6.QtWidgets import (
 
 import numpy as np
 
-from ...core import display, modality
+from ...core import modality
 from .model import COLORMAPS, DisplaySettings, Layer
 
 
@@ -234,8 +234,8 @@ class DisplayControls(QGroupBox):
         self._loading = True
         self._set_limit_kind(kind, L.unit)
         if kind == "absolute":
-            try:
-                lo, hi = display.auto_limits(np.asarray(L.data), s.percentiles)
+            try:  # remembered from the colour bar; a cube's HitImage is not expanded
+                lo, hi = L.percentile_limits(s.percentiles)
             except (ValueError, TypeError):
                 lo, hi = 0.0, 1.0
             lo, hi = float(lo), float(hi)

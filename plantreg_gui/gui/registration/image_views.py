@@ -105,6 +105,7 @@ class ImageView(QGraphicsView):
         self.scene().addItem(self._region)
         self.draw_mode: str | None = None           # None, "rect" or "polygon"
         self._drawing: list[QPointF] = []           # corners while drawing
+        self._outline: list[tuple[float, float]] = []  # the region shown when not drawing
         self.array: np.ndarray | None = None       # the (H, W, 3) uint8 shown
         self.overlay: np.ndarray | None = None     # the (H, W, 4) uint8 overlay shown
         self._auto_fit = True
@@ -166,21 +167,40 @@ class ImageView(QGraphicsView):
     # ---------------------------------------------------------------- region drawing
     def set_draw_mode(self, mode: str | None) -> None:
         """``"rect"`` (drag), ``"polygon"`` (click the corners, double-click to close) or None (pan)."""
+        self.cancel_drawing()  # a half-drawn region does not outlive its tool
         self.draw_mode = mode
-        self._drawing = []
         self.setDragMode(QGraphicsView.DragMode.NoDrag if mode else QGraphicsView.DragMode.ScrollHandDrag)
         self.viewport().setCursor(Qt.CursorShape.CrossCursor if mode else Qt.CursorShape.OpenHandCursor)
 
     def set_region_outline(self, points: list[tuple[float, float]] | None) -> None:
         """Draw a region's outline (image pixel coordinates); None hides it."""
+        self._outline = list(points or [])  # what Escape goes back to while drawing
+        self._draw_outline(points)
+
+    def _draw_outline(self, points: list[tuple[float, float]] | None) -> None:
         self._region.setVisible(bool(points))
         self._region.setPolygon(QPolygonF([QPointF(x, y) for x, y in (points or [])]))
+
+    def cancel_drawing(self) -> bool:
+        """Drop the region being drawn (Escape); the region drawn before stays. True if one was."""
+        if not self._drawing:
+            return False
+        self._drawing = []
+        self._draw_outline(self._outline)
+        return True
+
+    def keyPressEvent(self, e) -> None:  # noqa: N802
+        if e.key() == Qt.Key.Key_Escape and self.cancel_drawing():
+            e.accept()
+            return
+        super().keyPressEvent(e)
 
     def _scene_pos(self, e) -> QPointF:
         return self.mapToScene(e.position().toPoint())
 
     def mousePressEvent(self, e) -> None:  # noqa: N802
         if self.draw_mode and e.button() == Qt.MouseButton.LeftButton and self.array is not None:
+            self.setFocus(Qt.FocusReason.MouseFocusReason)  # Escape reaches this view while drawing
             p = self._scene_pos(e)
             if self.draw_mode == "rect":
                 self._drawing = [p, p]
@@ -208,7 +228,7 @@ class ImageView(QGraphicsView):
             pts = [(a.x(), a.y()), (b.x(), a.y()), (b.x(), b.y()), (a.x(), b.y())]
         else:
             pts = [(p.x(), p.y()) for p in d]
-        self.set_region_outline(pts)
+        self._draw_outline(pts)
 
     def mouseDoubleClickEvent(self, e) -> None:  # noqa: N802
         if self.draw_mode == "polygon" and e.button() == Qt.MouseButton.LeftButton:

@@ -92,6 +92,16 @@ class Layer:
     def bands(self) -> int:
         return 1 if self.data.ndim == 2 else int(self.data.shape[2])
 
+    def percentile_limits(self, percentiles: tuple[float, float]) -> tuple[float, float]:
+        """``display.auto_limits`` of the data (all bands pooled), remembered per percentiles: the
+        colour bar, the 2D rendering's limits and the start of absolute limits ask for the same
+        numbers, and a large cube's would be recomputed on the GUI thread each time."""
+        cache = self.__dict__.setdefault("_limits", {})
+        key = (id(self.data), float(percentiles[0]), float(percentiles[1]))
+        if key not in cache:
+            cache[key] = tuple(float(v) for v in display.auto_limits(self.data, percentiles))
+        return cache[key]
+
     def value_text(self, row: int, col: int, band: int | None = None) -> str:
         h, w = self.data.shape[:2]
         if not (0 <= row < h and 0 <= col < w):

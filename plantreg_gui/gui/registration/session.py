@@ -186,15 +186,16 @@ def region_job(result: Any, region: tuple[str, Any], sources: list[str],
                info: dict[str, tuple[Any, str]], progress=None) -> list:
     """core.region statistics of ``sources`` over ``region`` of ``result``; ``info[source]`` =
     (wavelengths or None, unit). Returns the RegionStats in ``sources`` order."""
+    from ...core.progress import ensure_reporter
     from ...core.region import region_stats
 
+    rep = ensure_reporter(progress)
     mask = mask_of(result.shape, region)
     out = []
-    for i, src in enumerate(sources):
-        if progress is not None:
-            progress(i / max(len(sources), 1), f"statistics of {src}")
+    for i, src in enumerate(sources):  # each source reports (and can be cancelled) chunk by chunk
         wl, unit = info.get(src, (None, ""))
-        out.append(region_stats(result, mask, src, wl, unit))
+        n = max(len(sources), 1)
+        out.append(region_stats(result, mask, src, wl, unit, progress=rep.sub(i / n, (i + 1) / n)))
     return out
 
 
@@ -601,10 +602,8 @@ class RegistrationSession:
         (None, None, '') for colour and multi-band images (no colour bar)."""
         if L.bands != 1:
             return None, None, ""
-        from ...core import display
-
         st = self.settings_for(L.name)
-        lim = st.limits if st.limits is not None else display.auto_limits(L.data, st.percentiles)
+        lim = st.limits if st.limits is not None else L.percentile_limits(st.percentiles)
         return st.cmap or modality.default_cmap(L.modality), lim, L.unit
 
     def layer_title(self, L: Layer, raw: bool = False) -> str:

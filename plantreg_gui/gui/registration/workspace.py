@@ -212,6 +212,7 @@ class RegistrationWorkspace(QWidget):
         self.region_panel.tool_changed.connect(self._region_tool)
         self.region_panel.csv_button.clicked.connect(lambda: self._guard(self._ask_region_csv,
                                                                          title="Cannot save the statistics"))
+        self._stats_worker: Worker | None = None  # the region statistics being computed
         self.session.stats_runner = self._run_region_stats  # a 4K cube's statistics take seconds
         sl.addWidget(self.region_panel)
         self.spectrum_label = QLabel("Spectrum under the cursor")
@@ -697,7 +698,7 @@ class RegistrationWorkspace(QWidget):
     # ------------------------------------------------------------------ interaction
     def _tab_changed(self, _i: int) -> None:
         if self.tabs.currentWidget() is self.cloud_view:
-            self.cloud_view.render_now()
+            self.cloud_view.show_staged()  # over several event-loop turns: no stall
 
     # ------------------------------------------------------------------ save the view
     def _ask_save_view(self) -> None:
@@ -733,7 +734,10 @@ class RegistrationWorkspace(QWidget):
         return path
 
     def _run_region_stats(self, job: tuple, token: int) -> None:
-        w = Worker(*job)
+        stale = self._stats_worker  # a new region or source: the statistics still running are stale
+        if stale is not None and stale in self._workers:
+            stale.cancel()
+        w = self._stats_worker = Worker(*job)
         self._start(w, "Region statistics", lambda out: self.session.apply_region_stats(out[0], token),
                     kind="region")
 

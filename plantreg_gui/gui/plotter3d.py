@@ -1,0 +1,110 @@
+"""What the 3D views (the workspace's point cloud, the wizard's frusta) share: a pyvistaqt plotter
+that is cheap to draw with software OpenGL, and a staged build that keeps every GUI-thread slice
+short.
+
+Measured on the 3D tab's first show (Mesa llvmpipe, demo cloud of 55k points; per-step times in
+docs/workspace.md): the render window's default 8x multi-sampling costs ~60-90 ms of CPU per
+frame (about two thirds of a frame), every ``plotter.render()`` is followed by a second render
+when the widget repaints (pyvistaqt's ``paintGL`` always renders), and the first frame of each
+new kind of actor compiles its shaders. So the views ask for no multi-sampling, change the scene
+with ``render=False`` and let one repaint draw it (:func:`repaint`), and build a new scene in
+:class:`Stages`: one step per event-loop turn, a repaint after each.
+
+GUI thread only (pyvistaqt: the render window is touched only there).
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
+
+from PySide6.QtCore import QObject, QTimer
+from PySide6.QtWidgets import QWidget
+
+# gap between two stages: the repaint of one stage and the event loop's other work run in between
+STAGE_GAP_MS = 15
+
+
+def make_plotter(parent: QWidget) -> Any:
+    """A ``pyvistaqt.QtInteractor`` child of ``parent``: no auto-update (pyvistaqt's default
+    re-renders 5 times a second for ever; the views repaint when their scene changes and the
+    interactor renders while the user rotates) and no multi-sampling (with software OpenGL it
+    tripled the cost of a frame; points and thin lines look the same without it)."""
+    from pyvistaqt import QtInteractor
+
+    return QtInteractor(parent, auto_update=False, multi_samples=0)
+
+
+def repaint(plotter: Any) -> None:
+    """Have ``plotter``'s widget draw the current scene once, at the next paint (not now: a
+    ``plotter.render()`` renders now *and* again when the widget repaints)."""
+    if plotter is not None:
+        plotter.interactor.update()
+
+
+@contextmanager
+def changing(plotter: Any) -> Iterator[Any]:
+    """Change ``plotter``'s scene without rendering (pyvista renders after many calls, e.g.
+    ``Plotter.reset_camera`` even when told ``render=False``), then :func:`repaint` once."""
+    old = plotter.suppress_rendering
+    plotter.suppress_rendering = True
+    try:
+        yield plotter
+    finally:
+        plotter.suppress_rendering = old
+        repaint(plotter)
+
+
+class Stages(QObject):
+    """Runs a list of steps, one per event-loop turn (each should take well under 200 ms of GUI
+    thread), ``STAGE_GAP_MS`` apart so that the repaint a step asked for and other events run in
+    between. :meth:`start` replaces a run still pending; :meth:`finish` runs what is left at once
+    (before a screenshot). A step that raises ends the run."""
+
+    def __init__(self, parent: QObject | None = None, gap_ms: int = STAGE_GAP_MS) -> None:
+        super().__init__(parent)
+        self._steps: list[Callable[[], Any]] = []
+        self._timer = QTimer(self)
+        self._timer.setSingleShot(True)
+        self._timer.setInterval(gap_ms)
+        self._timer.timeout.connect(self._next)
+        self.timings: list[tuple[str, float]] = []  # (step name, ms) of the last run, for benchmarks
+
+    @property
+    def running(self) -> bool:
+        return bool(self._steps)
+
+    def start(self, steps: list[Callable[[], Any]]) -> None:
+        self._steps = list(steps)
+        self.timings = []
+        if self._steps:
+            self._timer.start()
+        else:
+            self._timer.stop()
+
+    def cancel(self) -> None:
+        self._steps = []
+        self._timer.stop()
+
+    def finish(self) -> None:
+        self._timer.stop()
+        while self._steps:
+            self._run_one()
+
+    def _run_one(self) -> None:
+        import time
+
+        step = self._steps.pop(0)
+        t = time.perf_counter()
+        try:
+            step()
+        except BaseException:
+            self.cancel()
+            raise
+        self.timings.append((getattr(step, "__name__", "step"), (time.perf_counter() - t) * 1000.0))
+
+    def _next(self) -> None:
+        if self._steps:
+            self._run_one()
+        if self._steps:
+            self._timer.start()
