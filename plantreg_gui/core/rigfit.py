@@ -120,6 +120,46 @@ def _free_for(free: frozenset[str], name: str) -> list[str]:
 
 
 # ---------------------------------------------------------------------- robust depth under a click
+def grow_surface(win: np.ndarray, ok: np.ndarray, seed: tuple[int, int]) -> np.ndarray:
+    """(h, w) bool: the surface of the depth window ``win`` (h, w) metres grown from ``seed``
+    (row, col) through the pixels ``ok`` (h, w) bool, 4-connected, by depth steps below 4 mm +
+    0.5 % of the depth (the step of a leaf seen at 70 degrees; a jump to a leaf behind, the
+    ground or a flying pixel is larger)."""
+    reg = np.zeros_like(ok)
+    reg[seed] = True
+    stack = [seed]
+    while stack:
+        i, j = stack.pop()
+        zi = win[i, j]
+        for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            k, m = i + di, j + dj
+            if (0 <= k < win.shape[0] and 0 <= m < win.shape[1] and ok[k, m] and not reg[k, m]
+                    and abs(win[k, m] - zi) < 0.004 + 0.005 * zi):
+                reg[k, m] = True
+                stack.append((k, m))
+    return reg
+
+
+def inverse_depth_plane(z: np.ndarray, du: np.ndarray, dv: np.ndarray, w: np.ndarray) -> float:
+    """Depth at the click of a least-squares plane in inverse depth (a plane's inverse depth is
+    affine in the image) through pixels at offsets ``(du, dv)`` (N,) from the click with depths
+    ``z`` (N,) and weights ``w`` (N,), refitted once without its worst pixels; nan if ill-posed."""
+    A = np.stack([np.ones(z.size), du, dv], axis=1)
+    keep = np.ones(z.size, bool)
+    zc = math.nan
+    for _ in range(2):
+        if keep.sum() < 3 or np.linalg.matrix_rank(A[keep]) < 3:
+            break
+        sw = np.sqrt(w[keep])
+        coef, *_ = np.linalg.lstsq(A[keep] * sw[:, None], (1.0 / z[keep]) * sw, rcond=None)
+        if not coef[0] > 0:
+            break
+        zc = 1.0 / coef[0]
+        res = np.abs(1.0 / (A @ coef) - z)
+        keep = res <= max(0.002, 3.0 * float(np.median(res)))
+    return zc
+
+
 def landmark_depth(depth_m: np.ndarray, uv: np.ndarray, radius: int = 3, min_support: int = 5
                    ) -> tuple[float, str]:
     """Depth (metres along the optical axis) of the surface under the clicked pixel ``uv`` (2,).
@@ -149,19 +189,7 @@ def landmark_depth(depth_m: np.ndarray, uv: np.ndarray, radius: int = 3, min_sup
     cv, cu = v0 - a0, u0 - b0
 
     def grow(seed: tuple[int, int]) -> np.ndarray:
-        reg = np.zeros_like(ok)
-        reg[seed] = True
-        stack = [seed]
-        while stack:
-            i, j = stack.pop()
-            zi = win[i, j]
-            for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-                k, m = i + di, j + dj
-                if (0 <= k < win.shape[0] and 0 <= m < win.shape[1] and ok[k, m] and not reg[k, m]
-                        and abs(win[k, m] - zi) < 0.004 + 0.005 * zi):
-                    reg[k, m] = True
-                    stack.append((k, m))
-        return reg
+        return grow_surface(win, ok, seed)
 
     region = grow((cv, cu)) if ok[cv, cu] else np.zeros_like(ok)
     if region.sum() < min_support:
@@ -178,20 +206,7 @@ def landmark_depth(depth_m: np.ndarray, uv: np.ndarray, radius: int = 3, min_sup
     vv, uu = np.nonzero(region)
     z = win[region]
     du, dv = uu + b0 - uv[0], vv + a0 - uv[1]
-    A = np.stack([np.ones(z.size), du, dv], axis=1)
-    w = np.exp(-(du ** 2 + dv ** 2) / (2.0 * (0.6 * radius) ** 2))
-    keep = np.ones(z.size, bool)
-    zc = math.nan
-    for _ in range(2):
-        if keep.sum() < 3 or np.linalg.matrix_rank(A[keep]) < 3:
-            break
-        sw = np.sqrt(w[keep])
-        coef, *_ = np.linalg.lstsq(A[keep] * sw[:, None], (1.0 / z[keep]) * sw, rcond=None)
-        if not coef[0] > 0:
-            break
-        zc = 1.0 / coef[0]
-        res = np.abs(1.0 / (A @ coef) - z)
-        keep = res <= max(0.002, 3.0 * float(np.median(res)))
+    zc = inverse_depth_plane(z, du, dv, np.exp(-(du ** 2 + dv ** 2) / (2.0 * (0.6 * radius) ** 2)))
     if np.isfinite(zc) and z.min() - 0.005 <= zc <= z.max() + 0.005:
         return float(zc), ""
     return float(np.median(z)), ""

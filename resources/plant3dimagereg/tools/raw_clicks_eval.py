@@ -40,47 +40,16 @@ RES = HERE.parent
 
 
 def _surfaces(win: np.ndarray, ok: np.ndarray) -> np.ndarray:
-    """Label map (int, 0 = none) of the window's surfaces: valid pixels 4-connected through depth
-    steps below 4 mm + 0.5 % of the depth (the step of a leaf seen at 70 degrees; a jump to a leaf
-    behind, the ground or a flying pixel is larger)."""
+    """Label map (int, 0 = none) of the window's surfaces (:func:`rigfit.grow_surface` from
+    every valid pixel not yet on one)."""
     lab = np.zeros(win.shape, np.int32)
     n = 0
     for seed in zip(*np.nonzero(ok)):
         if lab[seed]:
             continue
         n += 1
-        lab[seed] = n
-        stack = [seed]
-        while stack:
-            i, j = stack.pop()
-            zi = win[i, j]
-            for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-                k, m = i + di, j + dj
-                if (0 <= k < win.shape[0] and 0 <= m < win.shape[1] and ok[k, m] and not lab[k, m]
-                        and abs(win[k, m] - zi) < 0.004 + 0.005 * zi):
-                    lab[k, m] = n
-                    stack.append((k, m))
+        lab[rigfit.grow_surface(win, ok & (lab == 0), seed)] = n
     return lab
-
-
-def _plane_depth(z: np.ndarray, du: np.ndarray, dv: np.ndarray, w: np.ndarray) -> float:
-    """A least-squares plane in inverse depth (a plane's inverse depth is affine in the image)
-    through pixels at offsets ``(du, dv)`` (N,) from the click with depths ``z`` and weights
-    ``w``, refitted once without its worst pixels, evaluated at the click; nan if ill-posed."""
-    A = np.stack([np.ones(z.size), du, dv], axis=1)
-    keep = np.ones(z.size, bool)
-    zc = math.nan
-    for _ in range(2):
-        if keep.sum() < 3 or np.linalg.matrix_rank(A[keep]) < 3:
-            break
-        sw = np.sqrt(w[keep])
-        coef, *_ = np.linalg.lstsq(A[keep] * sw[:, None], (1.0 / z[keep]) * sw, rcond=None)
-        if not coef[0] > 0:
-            break
-        zc = 1.0 / coef[0]
-        res = np.abs(1.0 / (A @ coef) - z)
-        keep = res <= max(0.002, 3.0 * float(np.median(res)))
-    return zc
 
 
 def edge_depth(depth_m: np.ndarray, uv: np.ndarray, radius: int = 3, min_support: int = 5,
@@ -128,7 +97,7 @@ def edge_depth(depth_m: np.ndarray, uv: np.ndarray, radius: int = 3, min_support
     if own and sizes[own] >= min_support and np.all(lab[near] == own):
         sel = (lab == own) & core
         w = np.exp(-(du[sel] ** 2 + dv[sel] ** 2) / (2.0 * (0.6 * radius) ** 2))
-        zc = _plane_depth(win[sel], du[sel], dv[sel], w)
+        zc = rigfit.inverse_depth_plane(win[sel], du[sel], dv[sel], w)
         z = win[sel]
         return (float(zc), "") if np.isfinite(zc) and z.min() - 0.005 <= zc <= z.max() + 0.005 \
             else (float(np.median(z)), "")
@@ -141,7 +110,7 @@ def edge_depth(depth_m: np.ndarray, uv: np.ndarray, radius: int = 3, min_support
     d0 = float(dist[sel].min())
     # the surface's pixels nearest the click carry the fit; farther ones keep the plane's tilt
     w = np.exp(-((dist[sel] - d0) ** 2) / (2.0 * 2.5 ** 2))
-    zc = _plane_depth(win[sel], du[sel], dv[sel], w)
+    zc = rigfit.inverse_depth_plane(win[sel], du[sel], dv[sel], w)
     nearest = win[sel][dist[sel] <= d0 + 1.0]
     if np.isfinite(zc) and abs(zc - float(np.median(nearest))) <= 0.01 + 0.01 * (d0 + 1.0):
         return float(zc), ""
