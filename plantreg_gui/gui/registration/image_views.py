@@ -34,6 +34,14 @@ def rgb8_from_qimage(img: QImage) -> np.ndarray:
     return buf[:, : 3 * w].reshape(h, w, 3).copy()
 
 
+def region_outline(kind: str, shape) -> list[tuple[float, float]]:
+    """The outline (x, y) corners of a region: ``("rect", (x0, y0, x1, y1))`` or
+    ``("polygon", [(x, y), ...])`` (the session's region format)."""
+    if kind == "rect":
+        x0, y0, x1, y1 = shape
+        return [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    return [tuple(p) for p in shape]
+
 class ImageItem(QGraphicsItem):
     """Draws a QImage as it is. (A QGraphicsPixmapItem would convert it to the screen's pixel
     format, e.g. 16-bit on some X servers, and lose the exact colours.)"""
@@ -225,7 +233,7 @@ class ImageView(QGraphicsView):
         d = self._drawing
         if self.draw_mode == "rect" and len(d) == 2:
             a, b = d
-            pts = [(a.x(), a.y()), (b.x(), a.y()), (b.x(), b.y()), (a.x(), b.y())]
+            pts = region_outline("rect", (a.x(), a.y(), b.x(), b.y()))
         else:
             pts = [(p.x(), p.y()) for p in d]
         self._draw_outline(pts)
@@ -547,14 +555,7 @@ class SideBySideView(ViewGrid):
     def _region(self) -> None:
         """Outline the session's region on every view."""
         reg = self.session.region
-        pts = None
-        if reg is not None:
-            kind, shape = reg
-            if kind == "rect":
-                x0, y0, x1, y1 = shape
-                pts = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
-            else:
-                pts = [tuple(p) for p in shape]
+        pts = None if reg is None else region_outline(*reg)
         for tv in self.views.values():
             tv.view.set_region_outline(pts)
 

@@ -94,8 +94,9 @@ class Layer:
 
     def percentile_limits(self, percentiles: tuple[float, float]) -> tuple[float, float]:
         """``display.auto_limits`` of the data (all bands pooled), remembered per percentiles: the
-        colour bar, the 2D rendering's limits and the start of absolute limits ask for the same
-        numbers, and a large cube's would be recomputed on the GUI thread each time."""
+        colour bar and the start of absolute limits ask for the same numbers, and a large cube's
+        would be recomputed on the GUI thread each time. (The 2D rendering takes its own, in
+        ``display.to_rgb8``: for depth it first drops values <= 0.)"""
         cache = self.__dict__.setdefault("_limits", {})
         key = (id(self.data), float(percentiles[0]), float(percentiles[1]))
         if key not in cache:

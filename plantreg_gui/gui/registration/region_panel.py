@@ -7,15 +7,12 @@ this panel only shows ``session.region_stats`` and asks for a file name.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
     QButtonGroup, QComboBox, QGroupBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget,
 )
 
-from ...core.errors import InputError
 from .image_views import SpectrumPlot
 from .model import format_value
 
@@ -139,15 +136,3 @@ class RegionPanel(QGroupBox):
             self.spectrum.set_spectrum(st.mean if st.trusted else None, st.wavelengths,
                                        f"{st.source}: mean over {st.trusted:,} P1 px")
         self.text.setText("<br>".join(lines))
-
-    # ------------------------------------------------------------------ CSV
-    def save_csv(self, path: str | Path) -> Path:
-        """Write every camera's statistics over the region (core.region.stats_csv) to ``path``, at
-        once (scripts and tests; the workspace's CSV… button computes them on a worker)."""
-        from ...core.imageio import atomic_write_text
-
-        if self.session.region is None:
-            raise InputError("draw a region first")
-        path = Path(path)
-        atomic_write_text(path, self.session.region_csv())
-        return path

@@ -456,12 +456,6 @@ class RegistrationSession:
         self.region = new
         self._region_changed()
 
-    def region_mask(self) -> np.ndarray | None:
-        """(H, W) bool of the region in the target grid (None without a region or a result)."""
-        if self.region is None or self.result is None:
-            return None
-        return mask_of(self.result.shape, self.region)
-
     def _camera_info(self, name: str) -> tuple[Any, str]:
         L = self.layer(name)
         return (None, "") if L is None else (L.wavelengths, L.unit)
