@@ -82,24 +82,20 @@ def run(args: argparse.Namespace) -> int:
     else:
         raise InputError("the landmarks file has no points (add some, or pass --refine or --silhouette to fit "
                          "from the images alone)", args.landmarks)
+    if args.refine or args.silhouette:
+        recordings, by_folder = _recordings(args, landmarks, fitted)  # read once for both
     if args.refine:
         # the refinement is its own module (core/refine.py); imported only when asked for
-        from ..core.recording import Recording
         from ..core.refine import refine_rig
         from ..core.progress import Reporter
 
-        folders = [landmarks.folder(k).resolve() for k in landmarks.recordings]
-        folders += [f.resolve() for f in args.recording if f.resolve() not in folders]
-        recordings = [Recording.load(f, fitted) for f in folders]
-        # keys as absolute folders: they match the recordings whatever the landmarks file's relative paths
-        by_folder = {str(landmarks.folder(k).resolve()): pts for k, pts in landmarks.recordings.items()}
         rr = refine_rig(fitted, recordings, free=free, landmarks=by_folder,
                         progress=Reporter(cli.StderrProgress(quiet=args.quiet)))
         fitted, method = rr.rig, ("landmarks+refine" if report.get("landmarks_used") else "refine")
         report["refine"] = rr.report
         warnings += list(rr.warnings)
     if args.silhouette:
-        fitted, method = _silhouette(args, fitted, landmarks, report, method)
+        fitted, method = _silhouette(args, fitted, recordings, by_folder, report, method)
     previous = rig.extra.get("calibration")
     fitted.extra["calibration"] = {
         "method": method,
@@ -125,17 +121,25 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _silhouette(args: argparse.Namespace, fitted, landmarks, report: dict, method: str):
-    """--silhouette: outline fit over the landmark file's recordings and any --recording DIR."""
-    from .. import cli
-    from ..core.progress import Reporter
+def _recordings(args: argparse.Namespace, landmarks, rig) -> tuple[list, dict]:
+    """The landmark file's recordings and any --recording DIR, read against ``rig``; the
+    landmarks keyed by absolute folder (they match the recordings whatever the landmarks file's
+    relative paths)."""
     from ..core.recording import Recording
-    from ..core.silhouette import fit_rig_recordings
 
     folders = [landmarks.folder(k).resolve() for k in landmarks.recordings]
     folders += [f.resolve() for f in args.recording if f.resolve() not in folders]
-    recordings = [Recording.load(f, fitted) for f in folders]
+    recordings = [Recording.load(f, rig) for f in folders]
     by_folder = {str(landmarks.folder(k).resolve()): pts for k, pts in landmarks.recordings.items()}
+    return recordings, by_folder
+
+
+def _silhouette(args: argparse.Namespace, fitted, recordings: list, by_folder: dict, report: dict, method: str):
+    """--silhouette: outline fit over the recordings (see :func:`_recordings`)."""
+    from .. import cli
+    from ..core.progress import Reporter
+    from ..core.silhouette import fit_rig_recordings
+
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
     rig, srep = fit_rig_recordings(fitted, recordings, by_folder, progress=progress)
     report["silhouette"] = srep
