@@ -36,6 +36,15 @@ def inward_normal(plant: str, cam: str, uv: np.ndarray, radius: float) -> np.nda
     u = u + max(int(uv[0] - radius), 0)
     v = v + max(int(uv[1] - radius), 0)
     keep = (u - uv[0]) ** 2 + (v - uv[1]) ** 2 <= radius ** 2
+    if not keep.any() and cam == "ir":
+        # a leaf tip in front of the tray's frame: the plant mask drops the frame's pixels and the
+        # tip with them; use the front surface instead (valid depth within 50 mm of the nearest)
+        d = load(plant, "depth").astype(np.float64)
+        r0, c0 = max(int(uv[1] - radius), 0), max(int(uv[0] - radius), 0)
+        win = d[r0:int(uv[1] + radius) + 1, c0:int(uv[0] + radius) + 1]
+        v, u = np.nonzero((win > 0) & (win < win[win > 0].min() + 50))
+        u, v = u + c0, v + r0
+        keep = (u - uv[0]) ** 2 + (v - uv[1]) ** 2 <= radius ** 2
     c = np.array([u[keep].mean(), v[keep].mean()]) - uv
     return c / max(np.linalg.norm(c), 1e-9)
 
