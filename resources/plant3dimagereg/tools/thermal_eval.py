@@ -10,9 +10,9 @@ time, everything else in). Ways of fitting:
 
 * ``joint FREE``: one ``plantreg fit-rig --free FREE`` over all landmarks (what
   ``fit_and_check.sh`` does);
-* ``2stage FREE``: the infrared intrinsics (``FREE``) and the hyperspectral pose from the
-  hyperspectral landmarks only, then the thermal pose from the thermal landmarks with the
-  infrared held fixed (two ``plantreg fit-rig`` calls, see README). Nested: a LOPO fold repeats
+* ``2stage FREE``: the infrared intrinsics (``FREE`` without its ``thermal:`` items) and the
+  hyperspectral pose from the hyperspectral landmarks only, then the thermal pose (and the
+  ``thermal:`` items of ``FREE``) from the thermal landmarks with the infrared held fixed (two ``plantreg fit-rig`` calls, see README). Nested: a LOPO fold repeats
   both stages without the plant.
 
   cd resources/plant3dimagereg/tools && PYTHONPATH=../../.. python thermal_eval.py compare
@@ -22,6 +22,7 @@ time, everything else in). Ways of fitting:
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -71,8 +72,11 @@ def only(recs: list[RecordingLandmarks], cam: str | None = None, drop_rec: str |
 def fit(kind: str, free: str, start: Rig, recs: list[RecordingLandmarks]) -> Rig:
     if kind == "joint":
         return fit_rig(start, recs, free=parse_free(free) if free else frozenset(), loo=False).rig
-    hs = fit_rig(start, only(recs, "hyperspectral"), free=parse_free(free) if free else frozenset(), loo=False).rig
-    return fit_rig(hs, only(recs, "thermal"), loo=False).rig
+    items = [x for x in free.split(",") if x]
+    f1 = parse_free(",".join(x for x in items if not x.startswith("thermal:"))) if items else frozenset()
+    f2 = [x for x in items if x.startswith("thermal:")]
+    hs = fit_rig(start, only(recs, "hyperspectral"), free=f1, loo=False).rig
+    return fit_rig(hs, only(recs, "thermal"), free=parse_free(",".join(f2)) if f2 else frozenset(), loo=False).rig
 
 
 def stats(v: list[float]) -> str:
@@ -82,7 +86,7 @@ def stats(v: list[float]) -> str:
 
 def compare(configs: list[str]) -> None:
     start = Rig.load(RES / "rig_nominal.json")
-    recs = load(RES / "landmarks.json", start)
+    recs = load(Path(os.environ.get("LANDMARKS", RES / "landmarks.json")), start)
     for cfg in configs:
         kind, _, free = cfg.partition(" ")
         rig = fit(kind, free, start, recs)
