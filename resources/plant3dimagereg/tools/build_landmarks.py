@@ -1,4 +1,6 @@
-"""Build ``../landmarks.json`` (plantreg.landmarks v1) from ``annotations.json``.
+"""Build ``../landmarks.json`` (plantreg.landmarks v1) from ``annotations.json``, and
+``../landmarks_heldout.json`` from the annotations marked ``"held_out"`` (read after ``rig.json``
+was fitted and kept out of its fit, to check it).
 
 ``annotations.json``: {"PLANT/CAMERA": [{"ir": [u, v], "other": [u, v], "note": ..., "how": ...}, ...]}
 (the accepted pairs with how each was obtained). Each pair becomes one landmark point
@@ -15,22 +17,30 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE.parent / "landmarks.json"
+HELD = HERE.parent / "landmarks_heldout.json"  # points kept out of rig.json's fit (annotations with "held_out")
 
 
-def main() -> None:
+def build(held_out: bool) -> tuple[dict, int]:
     ann = json.loads((HERE / "annotations.json").read_text())
     recs: dict[str, dict] = {}
     for key in sorted(ann):
         plant, cam = key.split("/")
-        pts = recs.setdefault(f"recordings/{plant}", {"points": []})["points"]
         for it in ann[key]:
+            if bool(it.get("held_out")) != held_out:
+                continue
+            pts = recs.setdefault(f"recordings/{plant}", {"points": []})["points"]
             pts.append({"depth_uv": [round(float(x), 2) for x in it["ir"]],
                         "cameras": {cam: [round(float(x), 2) for x in it["other"]]},
                         "note": it.get("note", "")})
-    doc = {"format": "plantreg.landmarks", "version": 1, "recordings": recs}
-    OUT.write_text(json.dumps(doc, indent=1) + "\n")
-    n = sum(len(r["points"]) for r in recs.values())
-    print(f"{OUT}: {n} points in {len(recs)} recordings")
+    return {"format": "plantreg.landmarks", "version": 1, "recordings": recs}, \
+        sum(len(r["points"]) for r in recs.values())
+
+
+def main() -> None:
+    for out, held in ((OUT, False), (HELD, True)):
+        doc, n = build(held)
+        out.write_text(json.dumps(doc, indent=1) + "\n")
+        print(f"{out}: {n} points in {len(doc['recordings'])} recordings")
 
 
 if __name__ == "__main__":

@@ -85,7 +85,7 @@ def main() -> None:
         out.setdefault(key, []).append({
             "ir": np.round(pi + ni * step, 2).tolist(), "other": np.round(po + no * step * SCALE[cam], 2).tolist(),
             "note": r["note"], "feature_ir": pi.round(2).tolist(), "feature_other": po.round(2).tolist(),
-            "inward_step_ir_px": step,
+            "inward_step_ir_px": step, **({"held_out": r["held_out"]} if "held_out" in r else {}),
             "how": "mean of two eye readings of the silhouette feature (reclick.py crops), moved inward onto valid depth"})
     (HERE / "annotations.json").write_text(json.dumps(out, indent=1) + "\n")
     print({k: len(v) for k, v in out.items()}, "dropped:", dropped)

@@ -1,22 +1,24 @@
 """Held-out figures for the thermal landmarks (issue 8, session land12).
 
-``heldout RIG [LANDMARKS]``: residuals of a rig (e.g. the previously shipped rig.json) on every
-landmark, no fitting: landmarks added after that rig was fitted are a true held-out test of it.
+``heldout RIG [LANDMARKS]``: residuals of a rig on landmarks, no fitting (default: ``rig.json`` is
+given as RIG by the user, LANDMARKS = ``landmarks_heldout.json``, the points read after rig.json
+was fitted — a true held-out test of it).
 
-``compare [FREE ...]``: for each way of fitting, the fitted residuals and two held-out measures
+``compare [WAY ...]``: on all 31 landmarks (``landmarks.json`` + ``landmarks_heldout.json``; env
+LANDMARKS=FILE for one file), for each way of fitting, the fitted residuals and two held-out measures
 per camera — leave-one-plant-out (LOPO: the plant's landmarks of every camera left out of the fit)
 and, for the thermal camera, leave-one-landmark-out (LOLO: one thermal landmark left out at a
 time, everything else in). Ways of fitting:
 
 * ``joint FREE``: one ``plantreg fit-rig --free FREE`` over all landmarks (what
-  ``fit_and_check.sh`` does);
+  ``fit_and_check.sh`` does with ``landmarks.json``);
 * ``2stage FREE``: the infrared intrinsics (``FREE`` without its ``thermal:`` items) and the
   hyperspectral pose from the hyperspectral landmarks only, then the thermal pose (and the
-  ``thermal:`` items of ``FREE``) from the thermal landmarks with the infrared held fixed (two ``plantreg fit-rig`` calls, see README). Nested: a LOPO fold repeats
-  both stages without the plant.
+  ``thermal:`` items of ``FREE``) from the thermal landmarks with the infrared held fixed
+  (tested, not shipped: README, "Fit"). Nested: a LOPO fold repeats both stages without the plant.
 
   cd resources/plant3dimagereg/tools && PYTHONPATH=../../.. python thermal_eval.py compare
-  cd resources/plant3dimagereg/tools && PYTHONPATH=../../.. python thermal_eval.py heldout /tmp/old_rig.json
+  cd resources/plant3dimagereg/tools && PYTHONPATH=../../.. python thermal_eval.py heldout ../rig.json
 """
 
 from __future__ import annotations
@@ -45,6 +47,20 @@ def load(path: Path, rig: Rig) -> list[RecordingLandmarks]:
                         p.get("note", "")) for p in r["points"]]
         out.append(RecordingLandmarks(key, Recording.load(path.parent / key).depth_m(rig.depth_scale), lms))
     return out
+
+
+def all_landmarks(rig: Rig) -> list[RecordingLandmarks]:
+    """``landmarks.json`` and ``landmarks_heldout.json`` together (31 points; LANDMARKS=FILE: that
+    file alone), one entry per recording, the held-out points after the fitted ones."""
+    if os.environ.get("LANDMARKS"):
+        return load(Path(os.environ["LANDMARKS"]), rig)
+    recs = {r.name: r for r in load(RES / "landmarks.json", rig)}
+    for r in load(RES / "landmarks_heldout.json", rig):
+        if r.name in recs:
+            recs[r.name].points.extend(r.points)
+        else:
+            recs[r.name] = r
+    return [recs[k] for k in sorted(recs)]
 
 
 def only(recs: list[RecordingLandmarks], cam: str | None = None, drop_rec: str | None = None,
@@ -86,7 +102,7 @@ def stats(v: list[float]) -> str:
 
 def compare(configs: list[str]) -> None:
     start = Rig.load(RES / "rig_nominal.json")
-    recs = load(Path(os.environ.get("LANDMARKS", RES / "landmarks.json")), start)
+    recs = all_landmarks(start)
     for cfg in configs:
         kind, _, free = cfg.partition(" ")
         rig = fit(kind, free, start, recs)
@@ -124,7 +140,7 @@ def compare(configs: list[str]) -> None:
 
 def heldout(rig_path: str, lm_path: str | None) -> None:
     rig = Rig.load(rig_path)
-    recs = load(Path(lm_path) if lm_path else RES / "landmarks.json", rig)
+    recs = load(Path(lm_path) if lm_path else RES / "landmarks_heldout.json", rig)
     rows, rej = evaluate_landmarks(rig, recs)
     for d in rows:
         print(f"{d['residual_px']:7.2f} px  {d['camera']:13s} {d['recording']} #{d['index']} {d['note']}")
