@@ -7,7 +7,9 @@ readings agree (<= 2 px infrared, <= 4 px in the other camera); the landmark is 
 moved inward onto the leaf (from 0 px) until the infrared pixel is valid, within 25 mm of the leaf 4 px further in, and its 3x3 neighbourhood (>= 7 valid) has
 consistent depth (a silhouette point itself is a flying pixel or a hole; up to 10 px), and the other camera's
 point is moved inward by the same physical distance (x 1.8 hyperspectral, x 2.2 thermal pixels per
-infrared pixel near the plants) along its own silhouette's inward normal.
+infrared pixel near the plants) along its own silhouette's inward normal. A reading's
+``"held_out"`` entry (why it is kept out of rig.json's fit) is carried over; build_landmarks.py
+writes those points to ``landmarks_heldout.json``.
 
   python resources/plant3dimagereg/tools/finalize.py
 """
