@@ -12,7 +12,7 @@ import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QLabel, QStackedLayout, QWidget
 
-from ..plotter3d import Stages, changing, make_plotter
+from ..plotter3d import Stages, changing, first_frame_held, make_plotter, release_first_frame, reserve_gl_window
 from .widgets import camera_colour, qpixmap
 
 
@@ -53,6 +53,7 @@ class FrustaView(QWidget):
         self._frusta: list = []
         self._axes = False
         self._stages = Stages(self)
+        reserve_gl_window(self)
 
     def _ensure_plotter(self) -> bool:
         if self.plotter is not None:
@@ -96,7 +97,8 @@ class FrustaView(QWidget):
     def _draw(self) -> None:
         """Draw the pending scene over several event-loop turns (plotter3d.Stages: with software
         OpenGL the plotter, its first frame and the first frame of each kind of actor each take
-        ~100 ms): the plotter (hidden), its first frame, boards and frusta, legend and axes."""
+        ~100 ms): the plotter (hidden), the widget shown (background only), VTK's first frame,
+        boards and frusta, legend and axes."""
         if self._scene is None:
             return
 
@@ -104,11 +106,16 @@ class FrustaView(QWidget):
             if not self._ensure_plotter():
                 self._stages.cancel()
 
-        def first_frame() -> None:
+        def show_widget() -> None:
             self._stack.setCurrentWidget(self.plotter.interactor)
+
+        def first_frame() -> None:
+            release_first_frame(self.plotter)
 
         steps = [] if self.plotter is not None else [plotter]
         if self.plotter is None or self._stack.currentWidget() is not self.plotter.interactor:
+            steps.append(show_widget)
+        if self.plotter is None or first_frame_held(self.plotter):
             steps.append(first_frame)
         self._stages.start(steps + [self._draw_scene, self._draw_frusta, self._draw_legend, self._draw_axes])
 
@@ -171,6 +178,7 @@ class FrustaView(QWidget):
         if self._scene is not None:
             self._draw()
         self._stages.finish()
+        release_first_frame(self.plotter)
         try:
             self.plotter.render()
             img = self.plotter.screenshot(return_img=True)

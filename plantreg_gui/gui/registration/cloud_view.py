@@ -14,7 +14,7 @@ from PySide6.QtWidgets import (
     QCheckBox, QComboBox, QHBoxLayout, QLabel, QSpinBox, QSplitter, QVBoxLayout, QWidget,
 )
 
-from ..plotter3d import Stages, make_plotter, repaint
+from ..plotter3d import Stages, first_frame_held, make_plotter, release_first_frame, repaint, reserve_gl_window
 from .model import Cloud
 
 MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
@@ -80,6 +80,7 @@ class CloudView(QWidget):
         lay.addWidget(split, 1)
         self.colour.currentIndexChanged.connect(self._recolour)
         self.point_size.valueChanged.connect(self._resize_points)
+        reserve_gl_window(self.host)
 
     # ------------------------------------------------------------------ data
     def set_cloud(self, cloud: Cloud | None, meshes: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
@@ -130,11 +131,12 @@ class CloudView(QWidget):
             self._creating = False
         self.plotter = plotter
         self._axes = False
-        # hidden until show_gl_widget: its first frame (GL set-up, ~100 ms with software GL) is
-        # then drawn in an event-loop turn of its own, not in this one
+        # hidden until show_gl_widget, which paints the background only; VTK's first frame
+        # (~100 ms with software GL) follows in first_frame, each in an event-loop turn of its own
         plotter.interactor.hide()
         self.host_layout.addWidget(self.plotter.interactor)
-        self.plotter.set_background("#202428", top="#3a4450")
+        # a plain background: a gradient is one more shader to compile in the first frame
+        self.plotter.set_background("#22272e")
         try:
             self.plotter.enable_point_picking(callback=self._picked, show_message=False, left_clicking=True,
                                               show_point=True, color="red", point_size=12)
@@ -147,6 +149,9 @@ class CloudView(QWidget):
             self.placeholder.hide()
             self.plotter.interactor.show()
 
+    def first_frame(self) -> None:
+        release_first_frame(self.plotter)
+
     def render_now(self) -> None:
         """Build the whole scene now, if needed, and render (GUI thread; before a screenshot)."""
         if self.cloud is None and not self.meshes:
@@ -156,6 +161,7 @@ class CloudView(QWidget):
         if self.plotter is None:
             return
         self.show_gl_widget()
+        self.first_frame()
         self._add_axes()
         if self._dirty:
             self._rebuild()
@@ -164,15 +170,18 @@ class CloudView(QWidget):
     def show_staged(self) -> None:
         """Show the scene (the tab was shown, or a new cloud arrived while it is shown), built over
         several event-loop turns so that the GUI thread never stalls: the plotter (its GL widget),
-        a preview of the cloud (every k-th point) and the camera, the orientation axes, the full
-        cloud, the meshes -- each step followed by a repaint (plotter3d.Stages)."""
+        the widget shown (background only), VTK's first frame, a preview of the cloud (every k-th
+        point) and the camera, the orientation axes, the full cloud, the meshes -- each step
+        followed by a repaint (plotter3d.Stages)."""
         if self.cloud is None and not self.meshes:
             return
         steps: list = []
         if self.plotter is None:
             steps.append(self.ensure_plotter)
         if self.plotter is None or self.plotter.interactor.isHidden():
-            steps.append(self.show_gl_widget)  # its first frame: the background only
+            steps.append(self.show_gl_widget)  # the background colour only
+        if self.plotter is None or first_frame_held(self.plotter):
+            steps.append(self.first_frame)
         if self._dirty or self.plotter is None:
             n = 0 if self.cloud is None else len(self.cloud.points)
             k = max(1, -(-n // self.PREVIEW_POINTS))
