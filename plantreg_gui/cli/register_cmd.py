@@ -131,15 +131,17 @@ def run(args: argparse.Namespace) -> int:
     check_output_location(out, "output", folder=True, overwrite=args.overwrite, inputs=[rig_path, args.recording])
     from ..core.o3d_core import load_in_background
 
-    # overlaps with reading the images and the first, numpy-only steps of the registration (its
-    # first open3d_core() call waits for the load); joined always, so no error exits mid-load
-    loading = load_in_background()
+    # Open3D's extension loads in a thread (~0.4 s, GIL held) while the images decode (GIL
+    # released), and while the first, numpy-only steps of the registration run (its first
+    # open3d_core() call waits for the load); joined always, so no error exits mid-load
+    loading: list = []
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
     try:
-        recording = Recording.load(args.recording, rig)
+        recording = Recording.load(args.recording, rig, while_decoding=lambda: loading.append(load_in_background()))
         result = Registrar(rig, recording, params).register(args.target, progress.sub(0.0, 0.85))
     finally:
-        loading.join()
+        for t in loading:
+            t.join()
     if args.drop_mixed:
         drop_mixed(result)
     write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0), what=what,

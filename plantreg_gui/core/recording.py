@@ -10,12 +10,12 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 from .errors import InputError
-from .imageio import atomic_write_text, check_input_file, read_image, read_json
+from .imageio import atomic_write_text, check_input_file, image_decoder, read_json
 from .rig import Rig
 
 MANIFEST = "recording.json"
@@ -46,8 +46,10 @@ class Recording:
         return to_metres(self.depth, scale)
 
     @classmethod
-    def load(cls, folder: str | Path, rig: Rig | None = None) -> "Recording":
-        """Read a recording folder; with ``rig``, check it against the rig (names and sizes)."""
+    def load(cls, folder: str | Path, rig: Rig | None = None,
+             while_decoding: Callable[[], Any] | None = None) -> "Recording":
+        """Read a recording folder; with ``rig``, check it against the rig (names and sizes).
+        ``while_decoding``: see :func:`read_images`."""
         folder = Path(folder)
         if folder.is_file() and folder.name == MANIFEST:  # the manifest itself was given
             folder = folder.parent
@@ -65,14 +67,15 @@ class Recording:
                 raise InputError(f"camera '{name}' of the recording is not in the rig ({', '.join(rig.names)})", p)
             what = "depth map" if name is None else f"image of camera '{name}'"
             check_input_file(p, f"{what} listed in {MANIFEST}")
-        for name, p in entries.items():
+        decoded = read_images(list(entries.values()), while_decoding)
+        for (name, p), img in zip(entries.items(), decoded):
             if name is not None:
-                images[name] = read_image(p)
+                images[name] = img
                 paths[name] = p
         depth = None
         if None in entries:
             p = entries[None]
-            depth = read_image(p)
+            depth = decoded[list(entries).index(None)]
             paths["depth"] = p
             if depth.ndim != 2:
                 raise InputError(f"depth map must be single-channel, got shape {depth.shape}", p)
@@ -135,6 +138,60 @@ class Recording:
             m["depth_scale"] = self.depth_scale
         m.update(self.extra)
         atomic_write_text(folder / MANIFEST, json.dumps(m, indent=2) + "\n")
+
+
+def read_images(paths: list[Path], while_decoding: Callable[[], Any] | None = None) -> list[np.ndarray]:
+    """:func:`~.imageio.read_image` of every path: the files and headers are checked one by one,
+    then the pixels are decoded in parallel threads. Errors come as from a one-by-one read: the
+    first failing path in list order raises its :class:`InputError`.
+
+    Why: the decoders (OpenCV's PNG, ``np.fromfile``, imagecodecs) release the GIL, so a 4K PNG
+    and a hyperspectral cube decode side by side instead of one after the other.
+    ``while_decoding()`` is called once the decoding has been started (not at all if a header is
+    refused first): GIL-bound work placed there (``plantreg register`` loads Open3D's extension,
+    ~0.4 s with the GIL held) runs while the decoders need no GIL.
+    """
+    decoders: list[Callable[[], np.ndarray]] = []
+    refused: InputError | None = None
+    for p in paths:  # headers first, in order (Python work: serial anyway)
+        try:
+            decoders.append(image_decoder(p))
+        except InputError as e:
+            refused = e  # raised after the earlier files, as a one-by-one read would
+            break
+    threads = min(len(decoders), os.cpu_count() or 1)
+    if threads <= 1:
+        if while_decoding is not None and refused is None:
+            while_decoding()
+        out = [d() for d in decoders]
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+
+        # the largest files first: they bound the wall time
+        order = sorted(range(len(decoders)), key=lambda i: -_file_size(Path(paths[i])))
+        with ThreadPoolExecutor(threads, thread_name_prefix="plantreg-read") as ex:
+            futures = {i: ex.submit(decoders[i]) for i in order}
+            try:
+                if while_decoding is not None and refused is None:
+                    while_decoding()
+                out = [futures[i].result() for i in range(len(decoders))]
+            except BaseException:
+                for f in futures.values():
+                    f.cancel()
+                raise
+    if refused is not None:
+        raise refused
+    return out
+
+
+def _file_size(path: Path) -> int:
+    """Bytes to read for ``path`` (an ENVI header: its data file beside it, roughly)."""
+    for q in ([path.with_suffix(e) for e in (".img", ".dat", ".raw", "")] if path.suffix.lower() == ".hdr" else [path]):
+        try:
+            return q.stat().st_size
+        except OSError:
+            pass
+    return 0
 
 
 def _manifest_entries(m: Any, manifest: Path) -> dict[str | None, Path]:
