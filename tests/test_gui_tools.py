@@ -456,7 +456,12 @@ def test_wizard_frusta_view_is_drawn_in_stages(qapp, qtbot, no_qt_leaks):
         assert view.error is None and view.n_boards == 20
         assert len(view.plotter.renderer.actors) >= 1 + len(rig.cameras)  # boards, frusta (+ legend)
         assert view.plotter.legend is not None and view._axes
-        img = np.asarray(view.plotter.screenshot(return_img=True))[..., :3].astype(int)
+        # what the widget itself paints (a VTK screenshot renders the scene whatever the widget does)
+        from plantreg_gui.gui.plotter3d import first_frame_held
+        from plantreg_gui.gui.registration.image_views import rgb8_from_qimage
+
+        assert not first_frame_held(view.plotter)
+        img = rgb8_from_qimage(view.plotter.interactor.grabFramebuffer()).astype(int)
         # every camera's colour is drawn (frusta and legend)
         from plantreg_gui.gui.calibration.widgets import camera_colour
         from PySide6.QtGui import QColor

@@ -196,6 +196,8 @@ def _read_png_jpeg(path: Path, suffix: str) -> Callable[[], np.ndarray]:
                 import imagecodecs
 
                 return imagecodecs.png_decode(path.read_bytes())
+            except MemoryError:
+                raise
             except Exception:  # noqa: BLE001 - no imagecodecs, or a bad file: OpenCV's decoder says what is wrong
                 pass
         img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -212,8 +214,7 @@ def _read_png_jpeg(path: Path, suffix: str) -> Callable[[], np.ndarray]:
 def _read_tiff(path: Path) -> Callable[[], np.ndarray]:
     import tifffile
 
-    tf = tifffile.TiffFile(path)
-    try:
+    with tifffile.TiffFile(path) as tf:  # closed here: a decoder that never runs holds no file
         if not tf.series:
             raise InputError("TIFF file holds no image", path)
         series = tf.series[0]
@@ -227,13 +228,10 @@ def _read_tiff(path: Path) -> Callable[[], np.ndarray]:
             if ends and max(ends) > path.stat().st_size:
                 raise InputError("truncated TIFF file: its pixel data would end at byte "
                                  f"{max(ends)} but the file has {path.stat().st_size} bytes", path)
-    except BaseException:
-        tf.close()
-        raise
 
     def decode() -> np.ndarray:
-        with tf:
-            img = series.asarray()
+        with tifffile.TiffFile(path) as t:
+            img = t.series[0].asarray()
         if img.ndim == 3 and axes.endswith("SYX"):
             # planar-separate multi-band TIFF (GDAL's INTERLEAVE=BAND): tifffile gives bands
             # first; plantreg's arrays are band-last

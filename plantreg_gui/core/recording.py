@@ -147,9 +147,11 @@ def read_images(paths: list[Path], while_decoding: Callable[[], Any] | None = No
 
     Why: the decoders (OpenCV's PNG, ``np.fromfile``, imagecodecs) release the GIL, so a 4K PNG
     and a hyperspectral cube decode side by side instead of one after the other.
-    ``while_decoding()`` is called once the decoding has been started (not at all if a header is
-    refused first): GIL-bound work placed there (``plantreg register`` loads Open3D's extension,
-    ~0.4 s with the GIL held) runs while the decoders need no GIL.
+    ``while_decoding()`` is called before the decoders finish -- alongside them when more than one
+    thread decodes -- and not at all if a header is refused first: GIL-bound work placed there
+    (``plantreg register`` loads Open3D's extension, ~0.4 s with the GIL held) runs while the
+    decoders need no GIL. Threads: at most ``OMP_NUM_THREADS`` when set (``plantreg batch`` gives
+    each worker process its share of the cores), else the cores this process may use.
     """
     decoders: list[Callable[[], np.ndarray]] = []
     refused: InputError | None = None
@@ -159,7 +161,7 @@ def read_images(paths: list[Path], while_decoding: Callable[[], Any] | None = No
         except InputError as e:
             refused = e  # raised after the earlier files, as a one-by-one read would
             break
-    threads = min(len(decoders), os.cpu_count() or 1)
+    threads = min(len(decoders), _thread_budget())
     if threads <= 1:
         if while_decoding is not None and refused is None:
             while_decoding()
@@ -182,6 +184,19 @@ def read_images(paths: list[Path], while_decoding: Callable[[], Any] | None = No
     if refused is not None:
         raise refused
     return out
+
+
+def _thread_budget() -> int:
+    try:
+        n = int(os.environ.get("OMP_NUM_THREADS", "0"))
+    except ValueError:
+        n = 0
+    if n > 0:
+        return n
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not on Linux
+        return os.cpu_count() or 1
 
 
 def _file_size(path: Path) -> int:

@@ -93,11 +93,13 @@ def _components(mask: np.ndarray, min_area: int) -> np.ndarray:
 def depth_plant_mask(rig: Rig, depth_m: np.ndarray, min_component: float = 0.0005) -> np.ndarray:
     """bool (H, W): depth-camera pixels whose 3D point lies inside the rig's ROI (nearer than the
     ground), small components removed."""
-    from .mesh import backproject_depth
-
-    X = backproject_depth(rig.depth(), depth_m)  # (H, W, 3), NaN where no depth: never inside
-    inside = np.all((X >= rig.roi_min) & (X <= rig.roi_max), axis=2)
-    return _components(inside, max(1, int(min_component * inside.size)))
+    dcam = rig.depth()
+    z = np.asarray(depth_m, np.float64)
+    valid = np.isfinite(z) & (z > 0)
+    X = dcam.rays_cam() * np.where(valid, z, 0).reshape(-1, 1)
+    X = dcam.to_rig(X)
+    inside = np.all((X >= rig.roi_min) & (X <= rig.roi_max), axis=1).reshape(z.shape) & valid
+    return _components(inside, max(1, int(min_component * z.size)))
 
 
 def source_plant_mask(img: np.ndarray, min_component: float = 0.0005) -> np.ndarray:

@@ -8,11 +8,10 @@ frame (about two thirds of a frame), every ``plotter.render()`` is followed by a
 when the widget repaints (pyvistaqt's ``paintGL`` always renders), and the first frame of each
 new kind of actor compiles its shaders. So the views ask for no multi-sampling, change the scene
 with ``render=False`` and let one repaint draw it (:func:`repaint`), and build a new scene in
-:class:`Stages`: one step per event-loop turn, a repaint after each. Two costs of a GL widget's
-first show are moved out of the way: the window's switch to OpenGL composition
-(:func:`reserve_gl_window`, at start-up) and VTK's first frame, which a new plotter draws only
-when :func:`release_first_frame` is called (its first paints, during ``show()``, fill the
-background colour), so that showing the widget and VTK's first frame take a turn each.
+:class:`Stages`: one step per event-loop turn, a repaint after each. A new plotter draws VTK's
+first frame only when :func:`release_first_frame` is called (its first paints, during the
+widget's ``show()``, fill the background colour), so that showing the widget (with Qt's switch of
+the window to OpenGL composition) and VTK's first frame take a turn each.
 
 GUI thread only (pyvistaqt: the render window is touched only there).
 """
@@ -23,70 +22,10 @@ from contextlib import contextmanager
 from typing import Any, Callable, Iterator
 
 from PySide6.QtCore import QObject, QTimer
-from PySide6.QtGui import QSurfaceFormat
 from PySide6.QtWidgets import QWidget
 
 # gap between two stages: the repaint of one stage and the event loop's other work run in between
 STAGE_GAP_MS = 15
-
-
-_GL_WORKS: bool | None = None
-
-
-def _opengl_works() -> bool:
-    """An OpenGL context of the default format can be created and made current (once per
-    process; ~40-50 ms). False e.g. over a remote X display without GLX, or with Qt's offscreen
-    platform."""
-    global _GL_WORKS
-    if _GL_WORKS is None:
-        from PySide6.QtGui import QOffscreenSurface, QOpenGLContext
-
-        ctx = QOpenGLContext()
-        surface = QOffscreenSurface()
-        ok = ctx.create()
-        if ok:
-            surface.setFormat(ctx.format())
-            surface.create()
-            ok = surface.isValid() and ctx.makeCurrent(surface)
-            if ok:
-                ctx.doneCurrent()
-        surface.destroy()
-        _GL_WORKS = bool(ok)
-    return _GL_WORKS
-
-
-def reserve_gl_window(view: QWidget) -> None:
-    """Have the window that will hold ``view`` (a 3D view, while the window is being built)
-    composite with OpenGL from its first show.
-
-    Qt switches a window to OpenGL composition when its first ``QOpenGLWidget`` (pyvistaqt's
-    interactor is one) appears. In a window already shown, that re-creates the native window and
-    sets up the compositor, in C++ on the GUI thread: 55-125 ms here and ~120 ms more on the CI
-    machine, in the same event-loop turn as the GL widget's first frame (one 249 ms stall at the 3D
-    tab's first show). A hidden ``QOpenGLWidget`` child added before the window is shown moves that
-    work to the window's first show (start-up; ~80 ms). The price: the window is composited with
-    OpenGL from the start, not only once the 3D tab has been shown (with software OpenGL a 2D
-    repaint then costs some 20-40 ms more; nothing measurable with a GPU). Skipped where OpenGL
-    does not work, which would leave the whole window blank. The default surface format is
-    pyvistaqt's, installed before the window exists, as pyvistaqt requires."""
-    try:
-        from PySide6.QtOpenGLWidgets import QOpenGLWidget
-        from pyvistaqt import QtInteractor
-    except ImportError:  # no 3D stack: the view says so when it is shown
-        return
-    if not issubclass(QtInteractor, QOpenGLWidget):
-        return  # an older pyvistaqt's native-window interactor: no OpenGL composition at all
-    try:
-        from pyvistaqt.rwi import _default_format
-
-        QSurfaceFormat.setDefaultFormat(_default_format())
-    except Exception:  # noqa: BLE001 - pyvistaqt sets it again when the plotter is made
-        pass
-    if not _opengl_works():
-        return  # a window that composites with OpenGL would stay blank; the 3D views say why they fail
-    reserve = QOpenGLWidget(view)
-    reserve.setObjectName("gl-window-reserve")
-    reserve.hide()
 
 
 _INTERACTOR: type | None = None

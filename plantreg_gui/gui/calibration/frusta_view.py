@@ -12,7 +12,7 @@ import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QLabel, QStackedLayout, QWidget
 
-from ..plotter3d import Stages, changing, first_frame_held, make_plotter, release_first_frame, reserve_gl_window
+from ..plotter3d import Stages, changing, first_frame_held, make_plotter, release_first_frame
 from .widgets import camera_colour, qpixmap
 
 
@@ -53,7 +53,6 @@ class FrustaView(QWidget):
         self._frusta: list = []
         self._axes = False
         self._stages = Stages(self)
-        reserve_gl_window(self)
 
     def _ensure_plotter(self) -> bool:
         if self.plotter is not None:

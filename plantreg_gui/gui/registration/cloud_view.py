@@ -14,7 +14,7 @@ from PySide6.QtWidgets import (
     QCheckBox, QComboBox, QHBoxLayout, QLabel, QSpinBox, QSplitter, QVBoxLayout, QWidget,
 )
 
-from ..plotter3d import Stages, first_frame_held, make_plotter, release_first_frame, repaint, reserve_gl_window
+from ..plotter3d import Stages, first_frame_held, make_plotter, release_first_frame, repaint
 from .model import Cloud
 
 MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
@@ -80,7 +80,6 @@ class CloudView(QWidget):
         lay.addWidget(split, 1)
         self.colour.currentIndexChanged.connect(self._recolour)
         self.point_size.valueChanged.connect(self._resize_points)
-        reserve_gl_window(self.host)
 
     # ------------------------------------------------------------------ data
     def set_cloud(self, cloud: Cloud | None, meshes: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
