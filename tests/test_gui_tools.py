@@ -391,8 +391,8 @@ def test_first_show_of_the_3d_tab_is_staged_and_complete(registered_workspace, q
     assert probe.max_gap < limit, "\n\n".join(probe.traces)
     n = len(s.cloud.points)
     assert n > cv.PREVIEW_POINTS  # so the first frame was a preview
-    assert steps == ["ensure_plotter", "show_gl_widget", "first_frame", "preview_cloud", "axes", "full_cloud",
-                     "meshes"]
+    assert steps == ["ensure_plotter", "attach_gl_widget", "show_gl_widget", "first_frame", "preview_cloud", "axes",
+                     "full_cloud", "meshes"]
     assert cv._poly.n_points == n and cv._step == 1
     assert set(cv._mesh_actors) == set(s.meshes) == {"object mesh", "uncertainty mesh"}
     assert cv._axes

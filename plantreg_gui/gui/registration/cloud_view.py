@@ -125,7 +125,8 @@ class CloudView(QWidget):
         # constructing the GL widget processes events; a nested render request must not build a second one
         self._creating = True
         try:
-            plotter = make_plotter(self.host)
+            # without a parent: placed in the window by attach_gl_widget, in a turn of its own
+            plotter = make_plotter(None)
         finally:
             self._creating = False
         self.plotter = plotter
@@ -133,7 +134,6 @@ class CloudView(QWidget):
         # hidden until show_gl_widget, which paints the background only; VTK's first frame
         # (~100 ms with software GL) follows in first_frame, each in an event-loop turn of its own
         plotter.interactor.hide()
-        self.host_layout.addWidget(self.plotter.interactor)
         # a plain background: a gradient is one more shader to compile in the first frame
         self.plotter.set_background("#22272e")
         try:
@@ -143,7 +143,18 @@ class CloudView(QWidget):
             self.plotter.enable_point_picking(callback=self._picked, show_message=False)
         self._dirty = True
 
+    def attach_gl_widget(self) -> None:
+        """Put the (hidden) GL widget into the window. The first one makes Qt re-create the
+        window's native surface for OpenGL composition (60-190 ms with software OpenGL), so
+        this is a stage of its own, apart from the plotter's constructor."""
+        w = self.plotter.interactor if self.plotter is not None else None
+        if w is not None and w.parent() is not self.host:
+            self.host_layout.addWidget(w)
+            w.hide()
+            self.host.destroyed.connect(w.close)  # what pyvistaqt does for a plotter made with a parent
+
     def show_gl_widget(self) -> None:
+        self.attach_gl_widget()
         if self.plotter is not None and self.plotter.interactor.isHidden():
             self.placeholder.hide()
             self.plotter.interactor.show()
@@ -177,6 +188,8 @@ class CloudView(QWidget):
         steps: list = []
         if self.plotter is None:
             steps.append(self.ensure_plotter)
+        if self.plotter is None or self.plotter.interactor.parent() is not self.host:
+            steps.append(self.attach_gl_widget)
         if self.plotter is None or self.plotter.interactor.isHidden():
             steps.append(self.show_gl_widget)  # the background colour only
         if self.plotter is None or first_frame_held(self.plotter):
