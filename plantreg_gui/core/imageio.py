@@ -274,6 +274,7 @@ def _read_envi(path: Path) -> Callable[[], np.ndarray]:
             return np.asarray(spy.load())
         finally:
             del spy
+    decode.pixel_file = data  # what the decoder reads: the data file, not the header
     return decode
 
 
@@ -321,7 +322,8 @@ def image_decoder(path: str | Path) -> Callable[[], np.ndarray]:
     """:func:`read_image` in two steps: this call checks the file and its header (Python work,
     quick) and returns a function that decodes the pixels (the long part, in OpenCV, numpy or
     imagecodecs with the GIL released) -- so that several images decode in parallel threads
-    (:func:`~plantreg_gui.core.recording.read_images`). Both steps raise :class:`InputError`."""
+    (:func:`~plantreg_gui.core.recording.read_images`). Both steps raise :class:`InputError`.
+    The function's ``pixel_file`` is the file it reads (an ENVI header's data file)."""
     path = check_input_file(path, "image")
     suffix = path.suffix.lower()
 
@@ -337,7 +339,11 @@ def image_decoder(path: str | Path) -> Callable[[], np.ndarray]:
         raise InputError(f"unsupported image type '{suffix}' (plantreg reads {', '.join(IMAGE_SUFFIXES)})", path)
 
     decode = _image_errors(path, header)
-    return lambda: _checked_image(path, _image_errors(path, decode))
+
+    def checked() -> np.ndarray:
+        return _checked_image(path, _image_errors(path, decode))
+    checked.pixel_file = getattr(decode, "pixel_file", path)  # the file the decoder reads (its size: the work)
+    return checked
 
 
 def _image_errors(path: Path, step: Callable):

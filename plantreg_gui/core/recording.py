@@ -170,7 +170,7 @@ def read_images(paths: list[Path], while_decoding: Callable[[], Any] | None = No
         from concurrent.futures import ThreadPoolExecutor
 
         # the largest files first: they bound the wall time
-        order = sorted(range(len(decoders)), key=lambda i: -_file_size(Path(paths[i])))
+        order = sorted(range(len(decoders)), key=lambda i: -_file_size(decoders[i].pixel_file))
         with ThreadPoolExecutor(threads, thread_name_prefix="plantreg-read") as ex:
             futures = {i: ex.submit(decoders[i]) for i in order}
             try:
@@ -200,13 +200,10 @@ def _thread_budget() -> int:
 
 
 def _file_size(path: Path) -> int:
-    """Bytes to read for ``path`` (an ENVI header: its data file beside it, roughly)."""
-    for q in ([path.with_suffix(e) for e in (".img", ".dat", ".raw", "")] if path.suffix.lower() == ".hdr" else [path]):
-        try:
-            return q.stat().st_size
-        except OSError:
-            pass
-    return 0
+    try:
+        return Path(path).stat().st_size
+    except OSError:
+        return 0
 
 
 def _manifest_entries(m: Any, manifest: Path) -> dict[str | None, Path]:
