@@ -18,6 +18,7 @@ GUI thread only (pyvistaqt: the render window is touched only there).
 
 from __future__ import annotations
 
+import functools
 from contextlib import contextmanager
 from typing import Any, Callable, Iterator
 
@@ -28,33 +29,29 @@ from PySide6.QtWidgets import QWidget
 STAGE_GAP_MS = 15
 
 
-_INTERACTOR: type | None = None
-
-
+@functools.cache
 def _interactor_class() -> type:
     """pyvistaqt's ``QtInteractor`` whose paints fill the background colour, without a VTK
-    render, while ``first_frame_held`` (see :func:`release_first_frame`)."""
-    global _INTERACTOR
-    if _INTERACTOR is None:
-        from pyvistaqt import QtInteractor
+    render, while ``first_frame_held`` (see :func:`release_first_frame`). Made on first use:
+    pyvistaqt is imported lazily."""
+    from pyvistaqt import QtInteractor
 
-        class Interactor(QtInteractor):
-            first_frame_held = True
+    class Interactor(QtInteractor):
+        first_frame_held = True
 
-            def paintGL(self) -> None:  # noqa: N802 - Qt override
-                if not self.first_frame_held:
-                    super().paintGL()
-                    return
-                ctx = self.context()
-                if ctx is None:
-                    return
-                r, g, b = self.background_color.float_rgba[:3]
-                f = ctx.functions()
-                f.glClearColor(r, g, b, 1.0)
-                f.glClear(0x4000)  # GL_COLOR_BUFFER_BIT
+        def paintGL(self) -> None:  # noqa: N802 - Qt override
+            if not self.first_frame_held:
+                super().paintGL()
+                return
+            ctx = self.context()
+            if ctx is None:
+                return
+            r, g, b = self.background_color.float_rgba[:3]
+            f = ctx.functions()
+            f.glClearColor(r, g, b, 1.0)
+            f.glClear(0x4000)  # GL_COLOR_BUFFER_BIT
 
-        _INTERACTOR = Interactor
-    return _INTERACTOR
+    return Interactor
 
 
 def make_plotter(parent: QWidget) -> Any:
