@@ -109,27 +109,30 @@ def test_tiled_writer_with_threads_keeps_tile_order(tmp_path):
 
 
 def test_rays_cast_only_where_they_can_hit_give_the_same_registration(demo_dir, monkeypatch):
-    """Target rays outside the meshes' cone are not cast (rays_may_hit): every array of the
-    registration equals the one casting all rays, for two targets that cast (thermal, rgb)."""
+    """Target rays are computed only in grid cells whose rays can reach a mesh, and cast only where
+    they can hit (raycast.pixel_rays_toward, cone_marks): every array of the registration equals
+    the one computing and casting all rays, for two targets that cast (thermal, rgb)."""
     from plantreg_gui.core import raycast
 
     rig = Rig.load(demo_dir / "rig.json")
     rec = Recording.load(demo_dir / "recording", rig)
-    calls = []
-    real = register_mod.rays_may_hit
+    kept = []
+    real = register_mod.pixel_rays_toward
 
-    def spy(*a, **k):
-        m = real(*a, **k)
-        calls.append(None if m is None else float(m.mean()))
-        return m
+    def spy(cam, cones, grid=None):
+        pix, dirs = real(cam, cones, grid)
+        kept.append(len(pix) / (cam.width * cam.height))
+        return pix, dirs
 
     for target in ("thermal", "rgb"):
-        calls.clear()
-        monkeypatch.setattr(register_mod, "rays_may_hit", spy)
-        fast = Registrar(rig, rec).register(target)
-        assert len(calls) == 2 and all(c is not None and 0 < c < 0.6 for c in calls), calls  # a real cut
-        monkeypatch.setattr(register_mod, "rays_may_hit", lambda *a, **k: None)
-        full = Registrar(rig, rec).register(target)
+        kept.clear()
+        with monkeypatch.context() as m:
+            m.setattr(register_mod, "pixel_rays_toward", spy)
+            fast = Registrar(rig, rec).register(target)
+        assert len(kept) == 1 and 0 < kept[0] < 0.9, kept  # a real cut (thermal: the plant fills ~3/4 of its view)
+        with monkeypatch.context() as m:
+            m.setattr(register_mod, "cone_marks", lambda *a, **k: None)  # no bound: every pixel, every ray
+            full = Registrar(rig, rec).register(target)
         assert np.array_equal(fast.points_rig, full.points_rig, equal_nan=True)
         assert np.array_equal(fast.area, full.area)
         for cam in full.cases:

@@ -47,8 +47,8 @@ from .cases import AREA_NAMES, CASE_NAMES, Area, Case  # noqa: F401 (re-exported
 from .errors import InputError
 from .mesh import TriMesh, extend_boundary, object_mesh, uncertainty_mesh
 from .progress import Reporter, ensure_reporter
-from .raycast import (RAY_CHUNK, MeshScene, cast_where, pixel_rays_cam, pixel_rays_rig, project_points,
-                      rays_may_hit)
+from .raycast import (RAY_CHUNK, ConeMarks, MeshScene, RayGrid, cast_where, cone_marks, pixel_rays_cam,
+                      pixel_rays_toward, project_points, ray_grid)
 from .recording import Recording
 from .rig import Rig
 
@@ -343,34 +343,35 @@ class Registrar:
         recording.check(rig)
         self.meshes: Meshes | None = None
         self._rays_cam: dict[str, np.ndarray] = {}   # camera -> (H*W, 3) z=1 directions, camera frame
-        self._rays_rig: dict[str, np.ndarray] = {}   # camera -> (H*W, 3) unit directions, rig frame
+        self._grids: dict[str, RayGrid | None] = {}  # camera -> its undistortion grid (target rays)
         self._float_images: dict[str, np.ndarray] = {}
         self.timings: dict[str, float] = {}
         self.warnings: list[str] = []  # about the inputs, found while preparing (see core/roi.py)
         self._mixed_radius: dict[str, float] = {}  # source camera -> the mixed flag's radius, its px
 
     # -- caches
-    def ray_cache(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-        """The pixel-ray caches (camera name -> rays), for :meth:`use_ray_cache` of another
-        Registrar of the same rig (a batch: rays depend on the cameras only)."""
-        return self._rays_cam, self._rays_rig
+    def ray_cache(self) -> tuple[dict[str, np.ndarray], dict[str, RayGrid | None]]:
+        """The pixel-ray caches (camera name -> rays, camera name -> undistortion grid), for
+        :meth:`use_ray_cache` of another Registrar of the same rig (a batch: they depend on the
+        cameras only)."""
+        return self._rays_cam, self._grids
 
-    def use_ray_cache(self, cache: tuple[dict[str, np.ndarray], dict[str, np.ndarray]]) -> None:
+    def use_ray_cache(self, cache: tuple[dict[str, np.ndarray], dict[str, RayGrid | None]]) -> None:
         """Share the pixel rays of another Registrar of the *same rig* (see :meth:`ray_cache`)."""
-        self._rays_cam, self._rays_rig = cache
+        self._rays_cam, self._grids = cache
 
     def _camera_rays(self, cam: Camera) -> np.ndarray:
         if cam.name not in self._rays_cam:
             self._rays_cam[cam.name] = pixel_rays_cam(cam)
         return self._rays_cam[cam.name]
 
-    def _target_rays(self, cam: Camera) -> np.ndarray:
-        if cam.name not in self._rays_rig:
-            if cam.name == self.rig.depth_camera:
-                self._rays_rig[cam.name] = pixel_rays_rig(cam, self._camera_rays(cam))
-            else:  # float64 camera-frame rays of a 4K camera are 200 MB: keep only the float32 result
-                self._rays_rig[cam.name] = pixel_rays_rig(cam)
-        return self._rays_rig[cam.name]
+    def _target_rays(self, cam: Camera, cones: list[ConeMarks | None]) -> tuple[np.ndarray, np.ndarray]:
+        """Flat indices (M,) of the target pixels whose rays can meet a mesh of ``cones``, and
+        their unit rig-frame directions (M, 3) float32 (:func:`.raycast.pixel_rays_toward`);
+        every other ray misses."""
+        if cam.name not in self._grids:
+            self._grids[cam.name] = ray_grid(cam)
+        return pixel_rays_toward(cam, cones, self._grids[cam.name])
 
     def _mixed(self, scam: Camera, uvh: np.ndarray, case_h: np.ndarray, obj_idx: np.ndarray,
                shape: tuple[int, int]) -> np.ndarray:
@@ -460,22 +461,27 @@ class Registrar:
             if target == self.rig.depth_camera:
                 obj_idx, points, p31, no_idx, p5 = self._depth_camera_hits(meshes, N)
             else:
-                dirs = self._target_rays(tcam)
-                # only the rays that can reach a mesh are cast (a 4K view: a fraction of 8.3 M)
-                may = rays_may_hit(o_t, tcam.R_cam_rig, dirs, meshes.object.vertices, meshes.object.triangles)
+                # only the pixels whose rays can reach a mesh get rays (a 4K view: a fraction of
+                # 8.3 M), and of those only the rays that can are cast
+                cone_o, cone_u = (cone_marks(o_t, tcam.R_cam_rig, m.vertices, m.triangles)
+                                  for m in (meshes.object, meshes.uncertainty))
+                pix, dirs = self._target_rays(tcam, [cone_o, cone_u])
+                may = None if cone_o is None else cone_o.rays_may_hit(dirs)
                 hits = cast_where(meshes.object_scene, o_t, dirs, may, check=progress.check)
-                obj_idx = np.flatnonzero(hits.hit)
-                t_obj = hits.t[obj_idx]
+                hit = np.flatnonzero(hits.hit)
+                obj_idx = pix[hit]
+                t_obj = hits.t[hit]
                 points = np.full((N, 3), np.nan, dtype=np.float32)
-                points[obj_idx] = o_t.astype(np.float32) + dirs[obj_idx] * t_obj[:, None]
+                points[obj_idx] = o_t.astype(np.float32) + dirs[hit] * t_obj[:, None]
                 # uncertainty mesh before the object hit (P3.1) / anywhere (P5 when no object hit)
-                seg = dirs[obj_idx] * np.maximum(t_obj - np.float32(p.uncertainty_tol_m), 0)[:, None]
+                seg = dirs[hit] * np.maximum(t_obj - np.float32(p.uncertainty_tol_m), 0)[:, None]
                 p31 = meshes.uncertainty_scene.occluded(o_t, seg, 1.0, check=progress.check)
-                no_idx = np.flatnonzero(~hits.hit)
-                may_u = rays_may_hit(o_t, tcam.R_cam_rig, dirs, meshes.uncertainty.vertices, meshes.uncertainty.triangles)
+                miss = np.flatnonzero(~hits.hit)
+                no_idx = pix[miss]  # the pixels without an object hit that P5 can concern
+                may_u = None if cone_u is None else cone_u.rays_may_hit(dirs)
                 p5 = np.zeros(len(no_idx), dtype=bool)
-                test = np.arange(len(no_idx)) if may_u is None else np.flatnonzero(may_u[no_idx])
-                p5[test] = meshes.uncertainty_scene.occluded(o_t, dirs[no_idx[test]], np.inf, check=progress.check)
+                test = np.arange(len(no_idx)) if may_u is None else np.flatnonzero(may_u[miss])
+                p5[test] = meshes.uncertainty_scene.occluded(o_t, dirs[miss[test]], np.inf, check=progress.check)
             area = np.full(N, AREA_P6, dtype=np.uint8)
             area[obj_idx] = np.where(p31, AREA_P5, AREA_P4)
             area[no_idx[p5]] = AREA_P5
