@@ -70,6 +70,10 @@ def test_rays_toward_the_meshes_are_all_that_can_hit(seed):
         grid = raycast.ray_grid(cam)
         assert grid is not None and grid.margin is not None
         assert 0.02 < len(pix) / len(full) < 0.8, len(pix) / len(full)  # a real cut, and not everything
+    # meshes that no ray can reach: no pixel at all
+    empty = raycast.cone_marks(cam.center_rig, cam.R_cam_rig, np.zeros((0, 3)), np.zeros((0, 3), int))
+    pix, dirs = raycast.pixel_rays_toward(cam, [empty, empty])
+    assert pix.shape == (0,) and dirs.shape == (0, 3)
 
 
 @pytest.mark.parametrize("seed", [41, 42, 43, 44])
