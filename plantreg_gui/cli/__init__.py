@@ -107,18 +107,26 @@ def _install_signal_handlers() -> dict:
     return old
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The command line's parser. With ``argv`` naming a subcommand first (``register ...``), only
+    that subcommand's module is imported and its parser built (the others' modules are not
+    loaded: start-up of a pipeline step); otherwise (``--help``, an unknown word, no argument)
+    every subcommand's, so that the top-level help and errors list them all."""
     p = argparse.ArgumentParser(prog="plantreg", description="Multimodal 3D image registration for plant phenotyping")
     p.add_argument("--version", action="version", version=f"plantreg {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in SUBCOMMANDS:
+    first = argv[0] if argv else ""
+    only = first.replace("-", "_") if not first.startswith("-") else ""
+    for name in SUBCOMMANDS if only not in SUBCOMMANDS else (only,):
         mod = importlib.import_module(f".{name}_cmd", __name__)
         mod.add_parser(sub)
+    if only in SUBCOMMANDS and first not in sub.choices:  # a module's command is named otherwise
+        return build_parser()
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    parser = build_parser(list(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     # the words of this command line, for provenance (sys.argv is someone else's when called in-process)
     args.argv = list(sys.argv[1:] if argv is None else argv)
