@@ -469,3 +469,32 @@ def test_only_the_invoked_subcommand_is_built_and_help_lists_all(capsys):
     with pytest.raises(SystemExit):
         cli.build_parser(["fit_rig"]).parse_args(["fit_rig"])  # the module name is not a command
     assert "invalid choice: 'fit_rig'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("thread", [False, True])
+def test_program_exit_keeps_output_code_and_exit_handlers(tmp_path, thread):
+    """``cli.entry`` (the ``plantreg`` program) skips the interpreter's teardown, but the exit
+    code, every line printed, the atexit handlers and a still-running non-daemon thread's work
+    are kept."""
+    code = f"""
+import atexit, sys, threading, time
+from pathlib import Path
+from plantreg_gui import cli
+out = Path({str(tmp_path)!r})
+def fake_main():
+    atexit.register(lambda: (out / "atexit").write_text("ran"))
+    for i in range(20000):
+        print(f"line {{i}}")
+    print("partial", end="", file=sys.stderr)
+    if {thread}:
+        threading.Thread(target=lambda: (time.sleep(0.3), (out / "thread").write_text("done"))).start()
+    return 3
+cli.main = fake_main
+cli.entry()
+"""
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert p.returncode == 3
+    assert p.stdout.splitlines() == [f"line {i}" for i in range(20000)]
+    assert p.stderr == "partial"
+    assert (tmp_path / "atexit").read_text() == "ran"
+    assert (tmp_path / "thread").exists() == thread
