@@ -36,7 +36,7 @@ from .. import __version__
 from . import display, modality
 from .errors import InputError
 from .imageio import (TIFF_CODEC_DEFAULT, atomic_output_dir, atomic_path, atomic_write_text,
-                      dense_tiles, write_png, write_tiff_tiled)
+                      dense_tiles, tiff_tile_edge, write_png, write_tiff_tiled)
 from .progress import Reporter, ensure_reporter
 from .recording import Recording
 from .hits import HitImage, values_at
@@ -289,11 +289,30 @@ def _write_registered_tiff(path: Path, reg: Any, codec: str) -> float:
     """One ``registered/<camera>.tif`` (tiled, compressed, empty tiles encoded once); seconds taken."""
     t0 = time.perf_counter()
     if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
-        write_tiff_tiled(path, reg.shape, np.float32, reg.block, codec=codec)
+        write_tiff_tiled(path, reg.shape, np.float32, _hit_tiles(reg), codec=codec)
     else:
         reg = np.asarray(reg, dtype=np.float32)
         write_tiff_tiled(path, reg.shape, np.float32, dense_tiles(reg), codec=codec)
     return time.perf_counter() - t0
+
+
+def _hit_tiles(reg: HitImage) -> Callable[[int, int, int, int], np.ndarray | None]:
+    """``tile_of`` for :func:`~.imageio.write_tiff_tiled` of a HitImage: its blocks, and None at
+    once for a block without a hit, from an occupancy grid of the writer's tile size made once.
+    Why: ~90 % of a 4K view's 32,400 tiles hold no hit, and finding that out by searching the
+    hits tile by tile (``HitImage.block``) cost ~0.4 s of GIL-holding CPU; the grid takes 0.01 s.
+    Any block geometry is answered correctly (every grid cell it touches is looked at)."""
+    H, W = reg.shape[:2]
+    g = tiff_tile_edge(_bands(reg), 4)  # the writer's tile edge for float32: one cell per tile
+    rows, cols = np.divmod(np.asarray(reg.index), W)
+    occupied = np.zeros((-(-H // g), -(-W // g)), bool)
+    occupied[rows // g, cols // g] = True
+
+    def tile_of(r0: int, r1: int, c0: int, c1: int) -> np.ndarray | None:
+        if not occupied[r0 // g : (r1 - 1) // g + 1, c0 // g : (c1 - 1) // g + 1].any():
+            return None
+        return reg.block(r0, r1, c0, c1)
+    return tile_of
 
 
 class _Background:
