@@ -131,6 +131,10 @@ def params(variant: set[str]) -> R.RefineParams:
     p = R.RefineParams(keep_if_landmarks_disagree=False, workers=1)
     if "fine" in variant:
         p.levels_deg = (0.2, 0.0)
+    if any(x.startswith("lm") for x in variant):
+        # the convergence tests compare the patched cost with a chance NID without the landmark
+        # term: meaningless here (the held-out landmarks judge)
+        p.min_information = p.min_contrast = -1e9
     return p
 
 
