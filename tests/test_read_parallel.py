@@ -1,6 +1,6 @@
 """Images of a recording decoded in parallel threads (core.recording.read_images) and PNGs decoded
 by imagecodecs (core.imageio): the same arrays as the files hold, errors in the order a one-by-one
-read gives them."""
+read gives them, and a refused header before any pixel is decoded."""
 
 from __future__ import annotations
 
@@ -78,6 +78,32 @@ def test_read_images_reports_the_first_bad_file_in_list_order(tmp_path):
     with pytest.raises(InputError) as e:
         read_images([tmp_path / n for n in names] + [tmp_path / "bad2.tif"])
     assert "bad2.tif" in str(e.value)
+
+
+def test_a_refused_header_stops_the_read_before_any_pixel_is_decoded(tmp_path, monkeypatch):
+    import plantreg_gui.core.recording as recording
+
+    arrays = _files(tmp_path, np.random.default_rng(8))
+    (tmp_path / "bad.tif").write_bytes(b"II*\0garbage")
+    decoded = []
+    real = recording.image_decoder
+
+    def watched(path):
+        d = real(path)
+
+        def decode():
+            decoded.append(path)
+            return d()
+        decode.pixel_file = d.pixel_file
+        return decode
+
+    monkeypatch.setattr(recording, "image_decoder", watched)
+    with pytest.raises(InputError) as e:
+        read_images([tmp_path / n for n in arrays] + [tmp_path / "bad.tif"])
+    assert "bad.tif" in str(e.value) and decoded == []
+    # the same files without the bad one: every one decoded (the watch itself works)
+    read_images([tmp_path / n for n in arrays])
+    assert len(decoded) == len(arrays)
 
 
 def test_recording_load_reads_every_image(tmp_path):

@@ -142,28 +142,23 @@ class Recording:
 
 def read_images(paths: list[Path], while_decoding: Callable[[], Any] | None = None) -> list[np.ndarray]:
     """:func:`~.imageio.read_image` of every path: the files and headers are checked one by one,
-    then the pixels are decoded in parallel threads. Errors come as from a one-by-one read: the
-    first failing path in list order raises its :class:`InputError`.
+    then the pixels are decoded in parallel threads. A refused file or header raises its
+    :class:`InputError` before any pixel is decoded (validation before the expensive work); a
+    decoding error, the first failing path in list order.
 
     Why: the decoders (OpenCV's PNG, ``np.fromfile``, imagecodecs) release the GIL, so a 4K PNG
     and a hyperspectral cube decode side by side instead of one after the other.
     ``while_decoding()`` is called before the decoders finish -- alongside them when more than one
-    thread decodes -- and not at all if a header is refused first: GIL-bound work placed there
+    thread decodes -- and not at all if a header is refused: GIL-bound work placed there
     (``plantreg register`` loads Open3D's extension, ~0.4 s with the GIL held) runs while the
     decoders need no GIL. Threads: at most ``OMP_NUM_THREADS`` when set (``plantreg batch`` gives
     each worker process its share of the cores), else the cores this process may use.
     """
-    decoders: list[Callable[[], np.ndarray]] = []
-    refused: InputError | None = None
-    for p in paths:  # headers first, in order (Python work: serial anyway)
-        try:
-            decoders.append(image_decoder(p))
-        except InputError as e:
-            refused = e  # raised after the earlier files, as a one-by-one read would
-            break
+    # headers first, in order (Python work: serial anyway); the first refused one raises here
+    decoders: list[Callable[[], np.ndarray]] = [image_decoder(p) for p in paths]
     threads = min(len(decoders), _thread_budget())
     if threads <= 1:
-        if while_decoding is not None and refused is None:
+        if while_decoding is not None:
             while_decoding()
         out = [d() for d in decoders]
     else:
@@ -174,15 +169,13 @@ def read_images(paths: list[Path], while_decoding: Callable[[], Any] | None = No
         with ThreadPoolExecutor(threads, thread_name_prefix="plantreg-read") as ex:
             futures = {i: ex.submit(decoders[i]) for i in order}
             try:
-                if while_decoding is not None and refused is None:
+                if while_decoding is not None:
                     while_decoding()
                 out = [futures[i].result() for i in range(len(decoders))]
             except BaseException:
                 for f in futures.values():
                     f.cancel()
                 raise
-    if refused is not None:
-        raise refused
     return out
 
 
