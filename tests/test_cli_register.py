@@ -443,3 +443,58 @@ def test_demo_with_thermal_as_target(demo, tmp_path):
     assert m.sum() > 10000
     np.testing.assert_allclose(th[m], rec.images["thermal"][m], atol=1e-3)
     assert (out / "cases/ir.png").exists() and not (out / "cases/thermal.png").exists()
+
+
+def test_only_the_invoked_subcommand_is_built_and_help_lists_all(capsys):
+    """``plantreg register ...`` imports and builds only register's parser (start-up of a
+    pipeline step); ``plantreg --help`` and an unknown command still name every subcommand."""
+    code = ("import sys; from plantreg_gui import cli; p = cli.build_parser(sys.argv[1:]); "
+            "print(sorted(m.rsplit('.', 1)[1] for m in sys.modules if m.endswith('_cmd') and m.startswith('plantreg_gui.cli.')))")
+    out = subprocess.run([sys.executable, "-c", code, "register", "--rig", "r.json"], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "['register_cmd']"
+    out = subprocess.run([sys.executable, "-c", code, "fit-rig"], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "['fit_rig_cmd']"
+    full = subprocess.run([sys.executable, "-c", code, "--help"], capture_output=True, text=True).stdout
+    assert all(f"{m}_cmd" in full for m in cli.SUBCOMMANDS)
+    with pytest.raises(SystemExit):
+        cli.build_parser(["--help"]).parse_args(["--help"])
+    helptext = capsys.readouterr().out
+    for name in ("demo", "register", "calibrate", "fit-rig", "recording", "batch"):
+        assert name in helptext
+    # the lazily built parser parses register's arguments exactly as the full one
+    argv = ["register", "--rig", "r.json", "--recording", "d", "--target", "ir", "--out", "o", "--outputs", "ply"]
+    lazy, full_ns = cli.build_parser(argv).parse_args(argv), cli.build_parser().parse_args(argv)
+    assert {k: v for k, v in vars(lazy).items()} == {k: v for k, v in vars(full_ns).items()}
+    with pytest.raises(SystemExit):
+        cli.build_parser(["fit_rig"]).parse_args(["fit_rig"])  # the module name is not a command
+    assert "invalid choice: 'fit_rig'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("thread", [False, True])
+def test_program_exit_keeps_output_code_and_exit_handlers(tmp_path, thread):
+    """``cli.entry`` (the ``plantreg`` program) skips the interpreter's teardown, but the exit
+    code, every line printed, the atexit handlers and a still-running non-daemon thread's work
+    are kept."""
+    code = f"""
+import atexit, sys, threading, time
+from pathlib import Path
+from plantreg_gui import cli
+out = Path({str(tmp_path)!r})
+def fake_main():
+    atexit.register(lambda: (out / "atexit").write_text("ran"))
+    for i in range(20000):
+        print(f"line {{i}}")
+    print("partial", end="", file=sys.stderr)
+    if {thread}:
+        threading.Thread(target=lambda: (time.sleep(0.3), (out / "thread").write_text("done"))).start()
+    return 3
+cli.main = fake_main
+cli.entry()
+"""
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert p.returncode == 3
+    assert p.stdout.splitlines() == [f"line {i}" for i in range(20000)]
+    assert p.stderr == "partial"
+    assert (tmp_path / "atexit").read_text() == "ran"
+    assert (tmp_path / "thread").exists() == thread

@@ -212,3 +212,83 @@ def test_finite_rows_is_numpys_all_finite(finite_share):
     assert np.array_equal(display.finite_rows(a), truth)
     assert np.array_equal(display.finite_rows(a[:, :1]), np.isfinite(a[:, 0]))
     assert display.finite_rows(np.ones((4, 3), np.uint8)).all()
+
+
+# ---------------------------------------------------------------------- block-wise rendering (issue 10)
+def _reference_u8(a: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+    """The stretch written out on the whole array: u = a * s - lo * s in float32, clipped to
+    0..255, +0.5, truncated; NaN -> 0; mask = any band not finite."""
+    a = np.asarray(a, dtype=np.float32)
+    s = 255.0 / (hi - lo)
+    u = np.multiply(a, np.float32(s))
+    u -= np.float32(lo * s)
+    with np.errstate(invalid="ignore"):
+        u = np.clip(u, 0.0, 255.0)
+    u[np.isnan(u)] = 0.0
+    bad = ~np.isfinite(a)
+    return (u + np.float32(0.5)).astype(np.uint8), (bad if a.ndim == 2 else bad.any(axis=2))
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (7, 5), (300, 901), (301, 877, 3), (5, 3, 4), (2, 70000, 3)])
+def test_blockwise_stretch_equals_the_whole_array_formula(shape, monkeypatch):
+    rng = np.random.default_rng(sum(shape))
+    a = (rng.normal(50.0, 40.0, shape)).astype(np.float32)  # values beyond both limits too
+    flat = a.reshape(-1)
+    k = flat.size
+    flat[rng.choice(k, k // 7, replace=False)] = np.nan
+    flat[rng.choice(k, k // 50 + 1, replace=False)] = np.inf
+    flat[rng.choice(k, k // 50 + 1, replace=False)] = -np.inf
+    flat[0] = -0.0
+    flat[-1] = np.nan
+    want, want_nan = _reference_u8(a, 3.5, 97.25)
+    for block in (display._BLOCK_VALUES, 1000, 1):  # blocks of many rows, a few rows, one row
+        monkeypatch.setattr(display, "_BLOCK_VALUES", block)
+        got, nan = display._normalise_u8(a, 3.5, 97.25)
+        assert got.dtype == np.uint8 and np.array_equal(got, want)
+        assert (nan is None and not want_nan.any()) or np.array_equal(nan, want_nan)
+    # a strided view, float64 and integer input take the same path
+    got, _ = display._normalise_u8(a[:, ::2], 3.5, 97.25)
+    assert np.array_equal(got, _reference_u8(a[:, ::2], 3.5, 97.25)[0])
+    ints = rng.integers(0, 4000, shape).astype(np.uint16)
+    got, nan = display._normalise_u8(ints, 100.0, 3000.0)
+    assert nan is None and np.array_equal(got, _reference_u8(ints, 100.0, 3000.0)[0])
+    f64 = a.astype(np.float64)
+    assert np.array_equal(display._normalise_u8(f64, 3.5, 97.25)[0], want)
+
+
+def test_background_paint_and_fill_are_the_colour_exactly():
+    rng = np.random.default_rng(3)
+    for h, w in [(1, 1), (5, 7), (333, 1000)]:
+        rgb = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+        mask = rng.random((h, w)) < 0.6
+        want = rgb.copy()
+        want[mask] = BACKGROUND_RGB
+        display._paint_background(rgb, mask)
+        assert np.array_equal(rgb, want)
+        assert np.array_equal(display._background(h, w), np.broadcast_to(np.uint8(BACKGROUND_RGB), (h, w, 3)))
+    view = np.zeros((10, 20, 3), np.uint8)[:, ::2]  # not contiguous: the numpy path
+    display._paint_background(view, np.eye(10, dtype=bool))
+    assert (view[np.eye(10, dtype=bool)] == BACKGROUND_RGB).all() and view[0, 1].tolist() == [0, 0, 0]
+
+
+def test_channel_reductions_equal_numpys():
+    rng = np.random.default_rng(4)
+    b = rng.random((50, 60, 3)) < 0.2
+    assert np.array_equal(display.any_channel(b), b.any(axis=2))
+    a = rng.normal(size=(50, 60, 3)).astype(np.float32)
+    a[b] = np.nan
+    a[0, 0, 1] = np.inf
+    assert np.array_equal(display.all_finite_channels(a), np.isfinite(a).all(axis=2))
+
+
+def test_pca_projection_of_a_run_of_rows_equals_the_gathered_rows():
+    """A cube whose finite rows are one run is projected from views of it, one with a gap from
+    gathered copies: the same chunks, the same basis, the same scores bit for bit."""
+    rng = np.random.default_rng(5)
+    n, bands = 70_000, 8  # more than one projection chunk (65536 rows)
+    cube = (rng.normal(size=(1, n, bands)) @ rng.normal(size=(bands, bands))).astype(np.float32)
+    gap = np.insert(cube, 40_000, np.nan, axis=1)  # one NaN pixel in the middle of the first chunk
+    a = pca_scores(cube)
+    b = pca_scores(gap)
+    assert np.isnan(b[0, 40_000]).all()
+    assert np.array_equal(np.delete(b, 40_000, axis=1), a)

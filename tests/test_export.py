@@ -359,3 +359,36 @@ def test_cameras_with_clashing_file_names_are_refused(tmp_path):
     with pytest.raises(InputError, match="'thermal_1' and 'thermal 1'|'thermal 1' and 'thermal_1'"):
         export.write_outputs(res, rig, None, tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("bands", [1, 3, 204])
+def test_hit_tiles_answer_every_block_as_the_dense_image(bands, tmp_path):
+    """The TIFF writer's blocks of a HitImage (occupancy grid + block) are the dense image's
+    blocks, None exactly where the block holds no hit -- aligned tiles and any other block;
+    the written TIFF decodes to the dense image."""
+    from plantreg_gui.core.hits import HitImage
+
+    rng = np.random.default_rng(bands)
+    H, W = 203, 317
+    dense = np.full((H, W, bands), np.nan, np.float32)
+    blob = np.zeros((H, W), bool)
+    blob[40:90, 100:180] = True
+    blob[rng.integers(0, H, 30), rng.integers(0, W, 30)] = True  # scattered single hits
+    dense[blob] = rng.normal(size=(int(blob.sum()), bands)).astype(np.float32)
+    idx = np.flatnonzero(blob)
+    img = HitImage(idx, dense.reshape(-1, bands)[idx], (H, W, bands) if bands > 1 else (H, W))
+    ref = dense if bands > 1 else dense[:, :, 0]
+    tile_of = export._hit_tiles(img)
+    edge = export.tiff_tile_edge(bands, 4)
+    blocks = [(r, min(H, r + edge), c, min(W, c + edge)) for r in range(0, H, edge) for c in range(0, W, edge)]
+    blocks += [tuple(sorted(rng.integers(0, H, 2)) + sorted(rng.integers(0, W, 2))) for _ in range(300)]
+    for r0, r1, c0, c1 in blocks:
+        if r1 <= r0 or c1 <= c0:
+            continue
+        got, want = tile_of(r0, r1, c0, c1), ref[r0:r1, c0:c1]
+        if np.isnan(want).all():
+            assert got is None
+        else:
+            assert np.array_equal(got, want, equal_nan=True)
+    export._write_registered_tiff(tmp_path / "h.tif", img, "deflate-fp")
+    assert np.array_equal(tifffile.imread(tmp_path / "h.tif"), ref, equal_nan=True)

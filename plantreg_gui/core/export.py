@@ -21,6 +21,7 @@ leaves a complete-looking folder behind.
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import json
 import platform
 import re
@@ -35,7 +36,7 @@ from .. import __version__
 from . import display, modality
 from .errors import InputError
 from .imageio import (TIFF_CODEC_DEFAULT, atomic_output_dir, atomic_path, atomic_write_text,
-                      dense_tiles, write_png, write_tiff_tiled)
+                      dense_tiles, tiff_tile_edge, write_png, write_tiff_tiled)
 from .progress import Reporter, ensure_reporter
 from .recording import Recording
 from .hits import HitImage, values_at
@@ -65,6 +66,7 @@ class ExportContext:
     written: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     background: Any = None  # _Background: files encoded in a thread while the others are made
+    summary_draft: dict[str, Any] | None = None  # summary.json but its timings (_summary_draft)
 
 
 @dataclass(frozen=True)
@@ -127,10 +129,17 @@ def _write_mosaic(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str
     return "mosaic.png"
 
 
+def _summary_draft(ctx: ExportContext) -> dict[str, Any]:
+    """``summary.json`` but its export timings: made while the registered images are still being
+    encoded in the background (case counts, mapped pixels: ~0.06 s off the end of an export)."""
+    return build_summary(ctx.result, ctx.rig, ctx.recording, ctx.inputs, export_timings={},
+                         files=ctx.written + ["summary.json"])
+
+
 def _write_summary(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
+    summary = ctx.summary_draft if ctx.summary_draft is not None else _summary_draft(ctx)
     ctx.timings["total"] = time.perf_counter() - ctx.t_start
-    summary = build_summary(ctx.result, ctx.rig, ctx.recording, ctx.inputs, export_timings=ctx.timings,
-                            files=ctx.written + ["summary.json"])
+    summary["export_timings"] = _jsonable(dict(ctx.timings))
     atomic_write_text(ctx.folder / "summary.json", json.dumps(summary, indent=2, allow_nan=False) + "\n")
     return "summary.json"
 
@@ -260,6 +269,7 @@ def write_outputs(
         for part, step, weight in steps:
             kind, _, cam = step.partition(":")
             if part.key == "summary":  # it lists the timings and files: the background's first
+                ctx.summary_draft = _summary_draft(ctx)  # the rest of it while the background runs
                 _wait_background(ctx, rep, done / total)
             rep(done / total, f"writing {_step_label(kind, cam)}")
             t0 = time.perf_counter()
@@ -279,11 +289,30 @@ def _write_registered_tiff(path: Path, reg: Any, codec: str) -> float:
     """One ``registered/<camera>.tif`` (tiled, compressed, empty tiles encoded once); seconds taken."""
     t0 = time.perf_counter()
     if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
-        write_tiff_tiled(path, reg.shape, np.float32, reg.block, codec=codec)
+        write_tiff_tiled(path, reg.shape, np.float32, _hit_tiles(reg), codec=codec)
     else:
         reg = np.asarray(reg, dtype=np.float32)
         write_tiff_tiled(path, reg.shape, np.float32, dense_tiles(reg), codec=codec)
     return time.perf_counter() - t0
+
+
+def _hit_tiles(reg: HitImage) -> Callable[[int, int, int, int], np.ndarray | None]:
+    """``tile_of`` for :func:`~.imageio.write_tiff_tiled` of a HitImage: its blocks, and None at
+    once for a block without a hit, from an occupancy grid of the writer's tile size made once.
+    Why: ~90 % of a 4K view's 32,400 tiles hold no hit, and finding that out by searching the
+    hits tile by tile (``HitImage.block``) cost ~0.4 s of GIL-holding CPU; the grid takes 0.01 s.
+    Any block geometry is answered correctly (every grid cell it touches is looked at)."""
+    H, W = reg.shape[:2]
+    g = tiff_tile_edge(_bands(reg), 4)  # the writer's tile edge for float32: one cell per tile
+    rows, cols = np.divmod(np.asarray(reg.index), W)
+    occupied = np.zeros((-(-H // g), -(-W // g)), bool)
+    occupied[rows // g, cols // g] = True
+
+    def tile_of(r0: int, r1: int, c0: int, c1: int) -> np.ndarray | None:
+        if not occupied[r0 // g : (r1 - 1) // g + 1, c0 // g : (c1 - 1) // g + 1].any():
+            return None
+        return reg.block(r0, r1, c0, c1)
+    return tile_of
 
 
 class _Background:
@@ -342,7 +371,7 @@ def write_edge_step(folder: Path, result: RegistrationResult, kind: str, cam: st
     else:
         rel = "flying.png"
         mask = np.asarray(result.flying, dtype=bool)
-    write_png(folder / rel, np.where(mask, 255, 0).astype(np.uint8))
+    write_png(folder / rel, mask.view(np.uint8) * np.uint8(255))  # 0 / 255 (no int64 intermediate)
     return rel
 
 
@@ -398,7 +427,7 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
     cams = list(result.registered) if cams is None else cams
     pts = np.asarray(result.points_rig, dtype=np.float32)
     H, W = result.shape
-    ok = np.isfinite(pts).all(axis=2)
+    ok = display.all_finite_channels(pts)  # (H, W); plane by plane: ~5x faster than .all(axis=2)
     flat = np.flatnonzero(ok.ravel())
     rows, cols = np.divmod(flat, W)
     n = rows.size
@@ -503,7 +532,7 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
     for cam in _camera_order(result, rig):
         reg = result.registered[cam]
         if isinstance(reg, HitImage):  # NaN off the hits by construction
-            n_mapped = int(np.isfinite(reg.values).all(axis=1).sum())
+            n_mapped = int(np.count_nonzero(display.finite_rows(reg.values)))
         else:
             reg = np.asarray(reg)
             n_mapped = int(np.count_nonzero(display.finite_rows(reg.reshape(reg.shape[0] * reg.shape[1], -1))))
@@ -515,7 +544,7 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
             "mapped_pixels": n_mapped,
             "role": "target" if cam == result.target else "source",
         }
-    n_points = int(np.isfinite(np.asarray(result.points_rig)).all(axis=2).sum())
+    n_points = int(np.count_nonzero(display.all_finite_channels(np.asarray(result.points_rig))))
     return _jsonable({
         "format": SUMMARY_FORMAT,
         "version": SUMMARY_VERSION,
@@ -543,6 +572,12 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
 
 
 def _versions() -> dict[str, str | None]:
+    return dict(_versions_cached())
+
+
+@functools.lru_cache(maxsize=1)
+def _versions_cached() -> dict[str, str | None]:
+    """Looked up once per process (~20 ms of package metadata; a batch worker asks per recording)."""
     import cv2
 
     v: dict[str, str | None] = {"plantreg": __version__, "python": platform.python_version(),
