@@ -12,6 +12,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 import tifffile
 
 from plantreg_gui.core import register as register_mod
@@ -68,14 +69,16 @@ def test_cube_at_hits_writes_the_dense_outputs(demo_dir, tmp_path, monkeypatch):
     assert sd["cameras"] == ss["cameras"] and sd["cases"] == ss["cases"]
 
 
-def test_cli_runs_blas_in_one_thread_unless_told():
-    probe = "import plantreg_gui.cli, os; print(os.environ['OPENBLAS_NUM_THREADS'])"
+@pytest.mark.parametrize("program", ["plantreg_gui.cli", "plantreg_gui.gui.app"])
+def test_programs_run_blas_in_one_thread_unless_told(program):
+    # numpy reads the setting once, when it is first imported: the program's module must set it first
+    probe = f"import sys, {program}, os; print(os.environ['OPENBLAS_NUM_THREADS'], 'numpy' in sys.modules)"
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     run = lambda e: subprocess.run([sys.executable, "-c", probe], env=e, capture_output=True, text=True,  # noqa: E731
                                    check=True).stdout.strip()
-    assert run(env) == "1"
-    assert run({**env, "OPENBLAS_NUM_THREADS": "3"}) == "3"  # the user's setting wins
+    assert run(env) == "1 False"
+    assert run({**env, "OPENBLAS_NUM_THREADS": "3"}) == "3 False"  # the user's setting wins
 
 
 def test_values_at_a_run_of_hits_is_their_values():

@@ -13,14 +13,9 @@ import sys
 import time
 from pathlib import Path
 
-# Set before numpy is first imported (the subcommands import it): one command is one process
-# whose products are small or memory-bound ((N, 3) @ (3, 3) transforms, a 204 x 204 PCA), where
-# OpenBLAS's thread pool only spins -- measured -0.5 s of the ~3.5 s CPU of a paper-sized
-# `plantreg register`; the values are the same (each output element is computed by one thread
-# either way). A user's own setting wins; `plantreg batch` workers inherit it.
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+from .. import __version__, prefer_one_blas_thread
 
-from .. import __version__
+prefer_one_blas_thread()  # before numpy is first imported (the subcommands import it)
 from ..core.errors import Cancelled, PlantregError
 
 SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "recording", "batch")  # modules NAME_cmd

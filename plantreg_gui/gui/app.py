@@ -11,7 +11,9 @@ import os
 import sys
 from pathlib import Path
 
-from .. import __version__
+from .. import __version__, prefer_one_blas_thread
+
+prefer_one_blas_thread()  # before numpy is first imported (the views and the core import it)
 
 
 def build_parser() -> argparse.ArgumentParser:
