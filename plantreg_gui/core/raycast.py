@@ -353,8 +353,11 @@ def pixel_rays_toward(cam: Camera, cones: list["ConeMarks | None"],
     """The pixels of ``cam`` whose rays can meet one of the meshes of ``cones`` (:func:`cone_marks`
     from the camera's centre in its frame ``cam.R_cam_rig``; None: no bound), and their rays:
     flat pixel indices (M,) ascending, unit rig-frame directions (M, 3) float32, each bit for bit
-    the row of :func:`pixel_rays_rig`. Every other pixel's ray certainly misses every mesh (its
-    :meth:`ConeMarks.rays_may_hit` is False).
+    the row of :func:`pixel_rays_rig`. Every other pixel's ray misses every mesh (its
+    :meth:`ConeMarks.rays_may_hit` is False), as far as the cell bound holds: the margin is
+    4 x the grid's largest second difference, a safety factor over what the curvature between
+    nodes needs (worst case seen 6 % of the margin over 30+ strongly distorted cameras), on top
+    of the cone marks' own 1e-4 margin; models that fold get no bound (every cell computed).
 
     Why: a 4K target has 8.3 M pixels and the object covers ~15 % of its view; undistorting
     every pixel (Newton steps) and testing every ray cost ~2 s. The grid's cells are tested
