@@ -498,3 +498,16 @@ cli.entry()
     assert p.stderr == "partial"
     assert (tmp_path / "atexit").read_text() == "ran"
     assert (tmp_path / "thread").exists() == thread
+
+
+def test_progress_lines_always_name_their_stage(capsys):
+    from plantreg_gui.cli import StderrProgress
+
+    p = StderrProgress()
+    p(0.40, "sampling thermal")
+    p(0.48, "")  # a step's own fraction without a label (sample_bilinear reports so)
+    p(0.56, "classification hyperspectral")
+    lines = capsys.readouterr().err.splitlines()
+    assert lines == ["[ 40%] sampling thermal", "[ 48%] sampling thermal", "[ 56%] classification hyperspectral"]
+    StderrProgress(quiet=True)(0.5, "x")
+    assert capsys.readouterr().err == ""

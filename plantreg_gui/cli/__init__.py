@@ -33,6 +33,7 @@ class StderrProgress:
             return
         now = time.monotonic()
         msg, frac, t = self._last
+        message = message or msg  # a step's own progress without a label stays under its stage's name
         if message == msg and fraction - frac < 0.05 and now - t < 2.0:
             return
         self._last = (message, fraction, now)
