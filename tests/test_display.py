@@ -278,7 +278,7 @@ def test_channel_reductions_equal_numpys():
     a = rng.normal(size=(50, 60, 3)).astype(np.float32)
     a[b] = np.nan
     a[0, 0, 1] = np.inf
-    assert np.array_equal(display.all_finite_channels(a), np.isfinite(a).all(axis=2))
+    assert np.array_equal(display.finite_rows(a.reshape(-1, 3)), np.isfinite(a).all(axis=2).ravel())
 
 
 def test_pca_projection_of_a_run_of_rows_equals_the_gathered_rows():

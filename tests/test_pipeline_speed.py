@@ -147,8 +147,9 @@ def test_rays_cast_only_where_they_can_hit_give_the_same_registration(demo_dir, 
     d = np.array([[0.03, 0.03, 1.0], [0.1, 0.0, 1.0], [0.2, 0.0, 1.0], [0.0, -0.05, 1.0], [0.03, 0.03, -1.0]])
     d /= np.linalg.norm(d, axis=1)[:, None]
     T = np.array([[0, 1, 2]])
-    assert raycast.rays_may_hit(np.zeros(3), np.eye(3), d.astype(np.float32), V, T).tolist() == [True, True, False, False, False]
-    assert raycast.rays_may_hit(np.zeros(3), np.eye(3), d, V - [0, 0, 2], T) is None  # behind the camera: no bound
+    cone = raycast.cone_marks(np.zeros(3), np.eye(3), V, T)
+    assert cone.rays_may_hit(d.astype(np.float32)).tolist() == [True, True, False, False, False]
+    assert raycast.cone_marks(np.zeros(3), np.eye(3), V - [0, 0, 2], T) is None  # behind the camera: no bound
 
 
 def test_hit_image_preview_uses_the_given_pca_basis():

@@ -129,15 +129,6 @@ def any_channel(b: np.ndarray) -> np.ndarray:
     return out
 
 
-def all_finite_channels(a: np.ndarray) -> np.ndarray:
-    """``np.isfinite(a).all(axis=-1)`` for (..., C) with few channels (e.g. (H, W, 3) points),
-    plane by plane (see :func:`any_channel`); same values."""
-    out = np.isfinite(a[..., 0])
-    for c in range(1, a.shape[-1]):
-        out &= np.isfinite(a[..., c])
-    return out
-
-
 def _normalise_u8(img: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray | None]:
     """Scale (H, W[, C]) to 0..255 uint8 between ``lo`` and ``hi``; also returns the NaN mask (H, W)."""
     src = np.asarray(img)
@@ -237,13 +228,17 @@ def _one_blas_thread():
 
 
 def finite_rows(flat: np.ndarray) -> np.ndarray:
-    """``np.isfinite(flat).all(axis=1)`` for (N, C) ``flat``, (N,) bool -- checking all bands only
-    of the rows whose first band is finite: a registered cube is NaN off the object (~85 % of its
-    rows), and the full check of a 204-band cube is a pass over all its values."""
+    """``np.isfinite(flat).all(axis=1)`` for (N, C) ``flat``, (N,) bool. A few channels (points,
+    RGB) are checked plane by plane (see :func:`any_channel`: ~5x faster than the reduction along
+    a short axis); many bands only in the rows whose first band is finite: a registered cube is NaN
+    off the object (~85 % of its rows), and the full check of a 204-band cube is a pass over all
+    its values."""
     if flat.dtype.kind != "f":
         return np.ones(len(flat), bool)
     ok = np.isfinite(flat[:, 0])
-    if flat.shape[1] == 1:
+    if flat.shape[1] <= 4:
+        for c in range(1, flat.shape[1]):
+            ok &= np.isfinite(flat[:, c])
         return ok
     cand = np.flatnonzero(ok)
     step = max(1, (16 << 20) // (4 * flat.shape[1]))  # ~16 MB of values per chunk, never a copy of the cube

@@ -427,8 +427,7 @@ def write_ply(path: str | Path, result: RegistrationResult, cams: list[str] | No
     cams = list(result.registered) if cams is None else cams
     pts = np.asarray(result.points_rig, dtype=np.float32)
     H, W = result.shape
-    ok = display.all_finite_channels(pts)  # (H, W); plane by plane: ~5x faster than .all(axis=2)
-    flat = np.flatnonzero(ok.ravel())
+    flat = np.flatnonzero(display.finite_rows(pts.reshape(H * W, 3)))
     rows, cols = np.divmod(flat, W)
     n = rows.size
     names = ply_property_names(result, cams)
@@ -544,7 +543,7 @@ def build_summary(result: RegistrationResult, rig: Rig, recording: Recording | N
             "mapped_pixels": n_mapped,
             "role": "target" if cam == result.target else "source",
         }
-    n_points = int(np.count_nonzero(display.all_finite_channels(np.asarray(result.points_rig))))
+    n_points = int(np.count_nonzero(display.finite_rows(np.asarray(result.points_rig).reshape(-1, 3))))
     return _jsonable({
         "format": SUMMARY_FORMAT,
         "version": SUMMARY_VERSION,

@@ -332,19 +332,17 @@ def _rig_dirs(R_cam_rig: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray
     return d
 
 
-def pixel_rays_rig(cam: Camera, rays_cam: np.ndarray | None = None) -> np.ndarray:
+def pixel_rays_rig(cam: Camera) -> np.ndarray:
     """Unit ray directions of every pixel in the rig frame, (H*W, 3) float32, row-major.
-    Computed block by block (no full-size float64 temporaries for 4K cameras)."""
+    Computed block by block (no full-size float64 temporaries for 4K cameras). The registration
+    computes only the rays that can reach its meshes (:func:`pixel_rays_toward`, the same rows)."""
     W = cam.width
     out = np.empty((cam.height * W, 3), dtype=np.float32)
 
     def emit(r0: int, r1: int, cols, x: np.ndarray, y: np.ndarray) -> None:
         out[r0 * W : r1 * W] = _rig_dirs(cam.R_cam_rig, x, y)
 
-    if rays_cam is not None:
-        emit(0, cam.height, None, rays_cam[:, 0], rays_cam[:, 1])
-    else:
-        _grid_rays(cam, emit)
+    _grid_rays(cam, emit)
     return out
 
 
@@ -490,24 +488,10 @@ def cone_marks(origin: np.ndarray, R_cam_rig: np.ndarray, vertices: np.ndarray, 
     return ConeMarks(R, float(X0), float(Y0), float(c), mark)
 
 
-def rays_may_hit(origin: np.ndarray, R_cam_rig: np.ndarray, dirs: np.ndarray, vertices: np.ndarray,
-                 triangles: np.ndarray, margin: float = 1e-4, cells: int = 1024) -> np.ndarray | None:
-    """(N,) bool: which rays ``origin`` (3,) + t * ``dirs`` (N, 3) (rig frame, t >= 0) can meet the
-    mesh ``vertices`` (V, 3), ``triangles`` (F, 3); False only where a ray certainly misses every
-    triangle. None when this bound does not apply (a vertex at or behind the camera plane).
-
-    Why: a 4K target casts 8.3 M rays into meshes that cover a fraction of its view. In the
-    camera frame (rotation ``R_cam_rig``, centre ``origin``) a ray in an unmarked cell of
-    :func:`cone_marks` misses and need not be cast. The rays that are cast give the same hits.
-    """
-    cone = cone_marks(origin, R_cam_rig, vertices, triangles, margin, cells)
-    return None if cone is None else cone.rays_may_hit(dirs)
-
-
 def cast_where(scene: "MeshScene", origin: np.ndarray, dirs: np.ndarray, may: np.ndarray | None,
                check: Callable[[], None] | None = None) -> "Hits":
     """``scene.cast(origin, dirs)`` casting only the rays where ``may`` (N,) bool (None: all);
-    the others are misses (see :func:`rays_may_hit`)."""
+    the others are misses (see :meth:`ConeMarks.rays_may_hit`)."""
     if may is None:
         return scene.cast(origin, dirs, check=check)
     idx = np.flatnonzero(may)
