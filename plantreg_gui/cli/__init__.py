@@ -160,9 +160,8 @@ def main(argv: list[str] | None = None) -> int:
         print("plantreg: error: out of memory", file=sys.stderr)
         return 1
     except BrokenPipeError:
-        # whoever read our output went away (`plantreg ... | head`): stop quietly, as Unix tools do
-        # on SIGPIPE, with its exit status; the outputs are the command's own business (complete
-        # when it got as far as printing, else never moved into place)
+        # whoever read our output went away (`plantreg ... | head`): stop quietly with SIGPIPE's
+        # status, as Unix tools do; outputs are complete (printed after) or never moved into place
         _silence_stdio()
         return 128 + signal.SIGPIPE
     except OSError as e:  # disk full, no permission, a file where a folder should be: name it, no traceback
