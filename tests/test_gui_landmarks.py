@@ -191,3 +191,94 @@ def test_refine_runs_on_a_worker_with_progress_and_cancel(qtbot, page, demo):
     assert seen and after < before / 3
     s.undo()
     assert s.rig.to_dict() == rig0
+
+
+def _add_truth_points(s, rig, scene, n=12, seed=5):
+    for lm in synthetic_landmarks(rig, scene, n, 0.0, np.random.default_rng(seed), sources=[CAM]):
+        s.add_point(lm.depth_uv, {CAM: lm.cameras[CAM]})
+
+
+def _median_residual(rig, s):
+    rows, _ = evaluate_landmarks(rig, [RecordingLandmarks("plant", s.depth_m("plant"), s.points)], [CAM])
+    return float(np.median([d["residual_px"] for d in rows]))
+
+
+def test_report_follows_the_rig_through_undo_and_nudge(qtbot, page, demo, tmp_path):
+    """The report pane and the saved rig's provenance describe the rig they sit beside: undoing a
+    fit takes its report away with it, and after a nudge the residuals shown and saved are the
+    nudged rig's (before, both kept the fit's figures: a fitted-looking provenance on an unfitted
+    or hand-moved rig)."""
+    rig, rec, scene = demo
+    s = page.session
+    _add_truth_points(s, rig, scene)
+    with qtbot.waitSignal(page.fit_done, timeout=120_000):
+        page.fit_button.click()
+    assert "landmark fit" in page.report_text.toPlainText()
+    page.undo_button.click()  # back to the unfitted start rig
+    text = page.report_text.toPlainText()
+    assert "landmark fit" not in text and "not fitted yet" in text
+    s.save_rig(tmp_path / "undone.json")
+    assert "calibration" not in json.loads((tmp_path / "undone.json").read_text())
+    page.redo_button.click()
+    assert "landmark fit" in page.report_text.toPlainText() and s.report_is_current
+    fitted = _median_residual(s.rig, s)
+
+    page.left.setFocus()
+    qtbot.keyClick(page.left, Qt.Key.Key_W, Qt.KeyboardModifier.ShiftModifier)  # 1 degree tilt
+    assert not s.report_is_current
+    assert page.report_text.toPlainText().startswith("Residuals of the current rig (moved by hand")
+    s.save_rig(tmp_path / "nudged.json")
+    saved = Rig.load(tmp_path / "nudged.json")
+    cal = json.loads((tmp_path / "nudged.json").read_text())["calibration"]
+    truth = _median_residual(saved, s)  # the saved rig's residual, computed here from the points
+    assert truth > fitted + 2.0
+    assert cal["method"].startswith("manual nudge")
+    assert cal["per_camera"][CAM]["median_px"] == pytest.approx(truth, abs=0.05)
+    assert cal["before_nudge"]["per_camera"][CAM]["median_px"] == pytest.approx(fitted, abs=0.05)
+    page.undo_button.click()  # undo the nudge: the fit's report is current again
+    assert s.report_is_current and "landmark fit" in page.report_text.toPlainText()
+
+
+def test_quitting_with_unsaved_landmarks_or_rig_asks_first(qtbot, page, demo, tmp_path, monkeypatch):
+    """Closing the window (or opening another rig) with unsaved clicks or an unsaved fitted rig
+    asks before throwing them away; Cancel keeps the window and the work (before, they were lost
+    without a word)."""
+    from PySide6.QtWidgets import QMessageBox
+
+    from plantreg_gui.gui.main_window import MainWindow
+
+    rig, rec, scene = demo
+    asked = []
+    answer = {"button": QMessageBox.StandardButton.Cancel}
+
+    def fake_warning(parent, title, text, *a, **k):
+        asked.append(text)
+        return answer["button"]
+
+    monkeypatch.setattr(QMessageBox, "warning", staticmethod(fake_warning))
+    win = MainWindow()
+    qtbot.addWidget(win)
+    win.show()
+    s = page.session
+    page.setParent(None)
+    win.landmarks.set_session(s)
+    qtbot.waitUntil(lambda: not win.landmarks.is_busy(), timeout=300_000)
+    assert win.landmarks.confirm_discard("Quit") and not asked  # nothing edited yet
+    _add_truth_points(s, rig, scene)
+    assert s.unsaved() == ["landmarks"]
+    assert not win.close() and win.isVisible() and len(s.points) == 12
+    assert "landmarks is not saved" in asked[-1].lower()
+    s.save_landmarks(tmp_path / "landmarks.json")
+    assert s.unsaved() == []
+    s.fit(frozenset())
+    assert s.unsaved() == ["rig"]
+    assert not win.close() and "rig" in asked[-1]
+    s.save_rig(tmp_path / "rig.json")
+    n = len(asked)
+    s.nudge("rotate", 0, 0.2)
+    s.undo()  # back to what was saved: nothing to lose
+    assert s.unsaved() == [] and win.landmarks.confirm_discard("Quit") and len(asked) == n
+    s.nudge("rotate", 0, 0.2)
+    answer["button"] = QMessageBox.StandardButton.Discard
+    win.landmarks.shutdown()
+    assert win.close()

@@ -106,6 +106,11 @@ class LandmarkSession:
         self._undo: list[tuple[dict, dict]] = []
         self._redo: list[tuple[dict, dict]] = []
         self.modified = False
+        #: the rig (cameras) the report describes: a nudge or an undo makes the report stale
+        self._report_cameras: list[dict] | None = None
+        #: what was last opened or saved, to tell the user what closing would lose
+        self._saved_points = self._nonempty_points()
+        self._saved_cameras = self._cameras_dicts()
         #: the refinement routine (core.refine.refine_rig unless replaced, e.g. by a test)
         self.refine_fn: Callable[..., Any] | None = None
 
@@ -200,16 +205,42 @@ class LandmarkSession:
         self.events.selection.emit()
 
     # ------------------------------------------------------------------ undo
-    def _snapshot(self) -> tuple[dict, dict]:
-        return copy.deepcopy({k: [lm.to_dict() for lm in v] for k, v in self.landmarks.recordings.items()}), \
-            self.rig.to_dict()
+    def _points_dicts(self) -> dict[str, list[dict]]:
+        return copy.deepcopy({k: [lm.to_dict() for lm in v] for k, v in self.landmarks.recordings.items()})
 
-    def _restore(self, snap: tuple[dict, dict]) -> None:
-        pts, rig = snap
-        self.landmarks.recordings = {k: [Landmark(d["depth_uv"], d.get("cameras", {}), d.get("note", ""))
+    def _nonempty_points(self) -> dict[str, list[dict]]:
+        return {k: v for k, v in self._points_dicts().items() if v}  # a recording just added is no edit
+
+    def _cameras_dicts(self) -> list[dict]:
+        return [c.to_dict() for c in self.rig.cameras]
+
+    def _snapshot(self) -> tuple:
+        # the report travels with the rig it describes: undoing a fit also undoes its report
+        return (self._points_dicts(), self.rig.to_dict(), copy.deepcopy(self.report), list(self.warnings),
+                self._report_cameras)
+
+    def _restore(self, snap: tuple) -> None:
+        pts, rig, self.report, self.warnings, self._report_cameras = snap
+        self.landmarks.recordings = {k: [Landmark(d["depth_uv"], d.get("cameras", {}), d.get("note", ""),
+                                                  {x: y for x, y in d.items()
+                                                   if x not in ("depth_uv", "cameras", "note")})
                                          for d in v] for k, v in pts.items()}
         self.rig = Rig.from_dict(rig)
         self.selected, self.pending = None, None
+
+    @property
+    def report_is_current(self) -> bool:
+        """True when :attr:`report` describes the current rig (not one changed since by a nudge)."""
+        return self.report is not None and self._report_cameras == self._cameras_dicts()
+
+    def unsaved(self) -> list[str]:
+        """What closing would lose: 'landmarks' and/or 'rig' when changed since opened or saved."""
+        out = []
+        if self._nonempty_points() != self._saved_points:
+            out.append("landmarks")
+        if self._cameras_dicts() != self._saved_cameras:
+            out.append("rig")
+        return out
 
     def _push(self) -> None:
         self._undo.append(self._snapshot())
@@ -238,6 +269,7 @@ class LandmarkSession:
         self.events.points.emit()
         self.events.rig.emit()
         self.events.selection.emit()
+        self.events.report.emit()
 
     # ------------------------------------------------------------------ editing points
     def click_depth(self, uv: Any) -> None:
@@ -373,6 +405,7 @@ class LandmarkSession:
         self.rig = result.rig
         self.report = result.report
         self.warnings = list(result.warnings)
+        self._report_cameras = self._cameras_dicts()
         self.events.rig.emit()
         self.events.points.emit()  # residuals changed
         self.events.report.emit()
@@ -410,6 +443,7 @@ class LandmarkSession:
         self.rig = rig
         self.events.rig.emit()
         self.events.points.emit()
+        self.events.report.emit()  # a fit's report no longer describes this rig
 
     # ------------------------------------------------------------------ refine
     def refine_job(self, cameras: list[str] | None = None, **kw: Any) -> Callable[..., Any]:
@@ -471,6 +505,7 @@ class LandmarkSession:
                               for k, v in self.landmarks.recordings.items()}
         out.save(path)
         self.modified = False
+        self._saved_points = self._nonempty_points()
         return path
 
     def save_rig(self, path: str | Path) -> Path:
@@ -478,7 +513,21 @@ class LandmarkSession:
         from datetime import datetime, timezone
 
         rig = Rig.from_dict(self.rig.to_dict())
-        if self.report is not None:
+        if self.report is not None and not self.report_is_current or \
+                self.report is None and self._cameras_dicts() != self._saved_cameras:
+            # moved by hand since the last fit (or since opened): the old provenance and its
+            # residuals would describe another rig -- say what this one is, keep the old as history
+            before = self.report if self.report is not None else rig.extra.get("calibration")
+            rig.extra["calibration"] = {
+                "method": "manual nudge (plantreg-gui landmark page)",
+                "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                "landmarks_file": str(self.landmarks.path.resolve()) if self.landmarks.path else None,
+                "per_camera": self.summary(),
+                "note": "camera poses moved by hand after the fit below; per_camera are this rig's residuals",
+                "before_nudge": {k: v for k, v in (before or {}).items() if k != "time_s"},
+                "warnings": self.warnings if self.report is not None else [],
+            }
+        elif self.report is not None:
             rig.extra["calibration"] = {
                 "method": self.report.get("method", "landmarks") + " (plantreg-gui landmark page)",
                 "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -487,4 +536,5 @@ class LandmarkSession:
                 "warnings": self.warnings,
             }
         rig.save(path)
+        self._saved_cameras = self._cameras_dicts()
         return Path(path)

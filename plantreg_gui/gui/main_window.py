@@ -37,6 +37,7 @@ class MainWindow(QMainWindow):
         self.landmarks = LandmarkPage(self)
         self.tabs.addTab(self.landmarks, "Landmarks")
         self.statusBar()
+        self._discard_confirmed = False  # the user agreed to lose unsaved landmark work on quit
 
     # ------------------------------------------------------------------ start options
     def apply_start_options(self, args) -> None:
@@ -124,6 +125,11 @@ class MainWindow(QMainWindow):
         print(f"screenshot saved to {path}")
 
     def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        if not self._discard_confirmed:  # app.py closes the window again after the loop
+            if not self.landmarks.confirm_discard("Quit"):
+                event.ignore()
+                return
+            self._discard_confirmed = True
         for w in (self.workspace, self.wizard, self.landmarks):
             w.shutdown()
         super().closeEvent(event)
@@ -136,7 +142,7 @@ class MainWindow(QMainWindow):
         from .workers import show_error
 
         self.tabs.setCurrentWidget(self.landmarks)
-        if rig_path is None:
+        if rig_path is None or not self.landmarks.confirm_discard("Open another rig"):
             return
         lm, _ = QFileDialog.getSaveFileName(self, "Landmarks file (new or existing)",
                                             str(Path(rig_path).parent / "landmarks.json"), "Landmarks (*.json)",

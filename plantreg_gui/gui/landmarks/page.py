@@ -386,11 +386,15 @@ class LandmarkPage(QWidget):
         s = self.session
         rep = s.report or {}
         text = []
-        if not rep:
-            text.append("Residuals of the rig as opened (not fitted yet):")
+        if not rep or not s.report_is_current:
+            # the report below (if any) is of another rig: lead with the current rig's residuals
+            text.append("Residuals of the rig as opened (not fitted yet):" if not rep else
+                        "Residuals of the current rig (moved by hand since the report below):")
             for c, v in s.summary().items():
                 text.append(f"  {c:<16} n={v['n']:<4} median {v['median_px']:.2f} px   p90 {v['p90_px']:.2f} px   "
                             f"max {v['max_px']:.2f} px")
+            if rep:
+                text.append("\nBefore the nudges:")
         if "per_camera" in rep:
             from ...core.rigfit import format_report
 
@@ -580,7 +584,24 @@ class LandmarkPage(QWidget):
         self._compose()
 
     # ------------------------------------------------------------------ saving
+    def confirm_discard(self, action: str) -> bool:
+        """True when nothing unsaved would be lost by ``action`` (e.g. "Close") or the user agrees
+        to discard it; False (keep working) otherwise."""
+        from PySide6.QtWidgets import QMessageBox
+
+        what = self.session.unsaved() if self.session is not None else []
+        if not what:
+            return True
+        names = {"landmarks": "the landmarks", "rig": "the fitted or nudged rig"}
+        text = (f"{' and '.join(names[w] for w in what).capitalize()} "
+                f"{'are' if len(what) > 1 else 'is'} not saved. {action} anyway and lose "
+                f"{'them' if len(what) > 1 else 'it'}?")
+        B = QMessageBox.StandardButton
+        return QMessageBox.warning(self, f"{action}: unsaved work", text, B.Discard | B.Cancel, B.Cancel) == B.Discard
+
     def _ask_open(self) -> None:
+        if not self.confirm_discard("Open another rig"):
+            return
         rig, _ = QFileDialog.getOpenFileName(self, "Rig file", "", "Rig (*.json)")
         if not rig:
             return
