@@ -86,6 +86,11 @@ class ImageView(QGraphicsView):
         self.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform, False)
         self.setMouseTracking(True)
         self.setFrameShape(QFrame.Shape.NoFrame)
+        # no scroll bars (drag pans, the wheel zooms): a bar that appears when a fit zooms in
+        # shrinks the viewport, whose resize refits and hides the bar again -- an endless loop
+        # on the GUI thread, and a fit that ends with a bar shown cuts the image off
+        self.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.setVerticalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         self.setMinimumSize(120, 100)
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
         self._pix = ImageItem()
