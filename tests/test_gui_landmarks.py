@@ -282,3 +282,30 @@ def test_quitting_with_unsaved_landmarks_or_rig_asks_first(qtbot, page, demo, tm
     answer["button"] = QMessageBox.StandardButton.Discard
     win.landmarks.shutdown()
     assert win.close()
+
+
+def test_report_heading_says_whether_the_opened_rig_was_fitted(qtbot, page, demo):
+    """The report pane's heading: the shipped Plant3DImageReg rig was fitted by ``plantreg
+    fit-rig`` (its file says so) and must not be called "not fitted yet"; after a nudge it is no
+    longer the rig as opened (before, both read "as opened (not fitted yet)")."""
+    from plantreg_gui.core.landmark_session import LandmarkSession
+    from plantreg_gui.gui.landmarks.page import LandmarkPage
+
+    rig, rec, scene = demo
+    text = page.report_text.toPlainText()
+    assert "calibration" not in page.session.rig.extra and "not fitted yet" in text
+    fitted = Rig.from_dict(rig.to_dict())
+    fitted.extra["calibration"] = {"method": "landmarks", "date": "2026-11-30T11:56:02+00:00"}
+    p = LandmarkPage()
+    qtbot.addWidget(p)
+    s = LandmarkSession(fitted, LandmarkSet(), {"plant": rec})
+    s.set_camera(CAM)
+    _add_truth_points(s, rig, scene)
+    p.set_session(s)
+    try:
+        text = p.report_text.toPlainText()
+        assert "not fitted yet" not in text and "fitted before: landmarks, 2026-11-30" in text
+        s.nudge("rotate", 0, 1.0)
+        assert p.report_text.toPlainText().startswith("Residuals of the current rig (moved by hand")
+    finally:
+        p.shutdown()  # the overlay's worker: also when an assertion failed

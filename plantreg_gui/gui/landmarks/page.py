@@ -388,7 +388,7 @@ class LandmarkPage(QWidget):
         text = []
         if not rep or not s.report_is_current:
             # the report below (if any) is of another rig: lead with the current rig's residuals
-            text.append("Residuals of the rig as opened (not fitted yet):" if not rep else
+            text.append(self._rig_heading() if not rep else
                         "Residuals of the current rig (moved by hand since the report below):")
             for c, v in s.summary().items():
                 text.append(f"  {c:<16} n={v['n']:<4} median {v['median_px']:.2f} px   p90 {v['p90_px']:.2f} px   "
@@ -407,6 +407,17 @@ class LandmarkPage(QWidget):
                             f"{'converged' if v.get('converged') else 'NOT converged'}")
         text += [f"warning: {w}" for w in s.warnings]
         self.report_text.setPlainText("\n".join(text))
+
+    def _rig_heading(self) -> str:
+        """What the rig without a fit on this page is: as opened (fitted before or not), or moved."""
+        s = self.session
+        if "rig" in s.unsaved():
+            return "Residuals of the current rig (moved by hand, not fitted here):"
+        cal = s.rig.extra.get("calibration")
+        if isinstance(cal, dict):  # e.g. the shipped rig, fitted by plantreg fit-rig
+            when = f", {str(cal['date'])[:10]}" if cal.get("date") else ""
+            return f"Residuals of the rig as opened (fitted before: {cal.get('method', 'unknown method')}{when}):"
+        return "Residuals of the rig as opened (not fitted yet):"
 
     def _sync_enabled(self) -> None:
         s = self.session
