@@ -155,3 +155,18 @@ def test_nudging_the_depth_camera_is_refused(world):
     s = session_for(world)
     with pytest.raises(InputError):
         s.nudge("rotate", 0, 1.0, camera=s.rig.depth().name)
+
+
+def test_undo_keeps_fields_it_does_not_know(world):
+    """A landmark's extra fields (written by another tool, kept by the file format) survive an undo
+    (before, restoring the undo snapshot dropped everything but depth_uv, cameras and note)."""
+    from plantreg_gui.core.landmarks import Landmark
+
+    s = session_for(world)
+    s.landmarks.recordings["plant"].append(Landmark([10.0, 20.0], {CAM: [30.0, 40.0]}, "tip",
+                                                    {"uncertainty_px": 2.5, "by": "annotator A"}))
+    s.add_point([50.0, 60.0], {CAM: [70.0, 80.0]})
+    s.undo()
+    assert len(s.points) == 1 and s.points[0].note == "tip"
+    assert s.points[0].extra == {"uncertainty_px": 2.5, "by": "annotator A"}
+    assert s.points[0].to_dict()["uncertainty_px"] == 2.5
