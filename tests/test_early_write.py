@@ -160,3 +160,80 @@ def test_early_tiff_of_another_image_or_codec_is_not_used(tmp_path):
         early.take("a", tmp_path / "sub" / "a.tif")
     assert tifffile.imread(tmp_path / "sub" / "a.tif").tobytes() == img.tobytes()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sub"]
+
+
+def test_done_reports_only_final_rows(monkeypatch):
+    """``sample_bilinear(done=)``: whenever done(k) is called, the first k rows of ``out`` already
+    hold their final values (a TIFF writer reads them while the rest is sampled)."""
+    rng = np.random.default_rng(6)
+    C, h, w = 19, 30, 40
+    cube = rng.standard_normal((C, h, w)).astype(np.float32).transpose(1, 2, 0)
+    n = 60_000  # several chunks
+    uv = np.column_stack([rng.uniform(0, w - 1, n), rng.uniform(0, h - 1, n)]).astype(np.float32)
+    uv[rng.random(n) < 0.2] = np.nan
+    rows = np.sort(rng.choice(n + 3000, n, replace=False))
+    for threads in (1, 2):
+        out = np.empty((n + 3000, C), np.float32)
+        snapshots = []
+        sample_bilinear(cube, uv, out=out, rows=rows, threads=threads,
+                        done=lambda k: snapshots.append((k, out[:k].copy())))
+        assert snapshots[-1][0] == len(out) and len(snapshots) > 2
+        assert [k for k, _ in snapshots] == sorted(k for k, _ in snapshots)
+        for k, snap in snapshots:
+            assert snap.tobytes() == out[:k].tobytes(), (threads, k)
+
+
+def test_hit_image_being_filled_waits_for_its_rows():
+    """A HitImage handed over while its values are filled: ``block`` returns only final rows, and
+    stops with Cancelled when the filler fails."""
+    import threading
+
+    from plantreg_gui.core.hits import RowsReady
+
+    H, W, B = 64, 48, 3
+    idx = np.arange(0, H * W, 2)
+    final = np.random.default_rng(2).random((len(idx), B), dtype=np.float32)
+    vals = np.full_like(final, -1.0)
+    img = HitImage(idx, vals, (H, W, B))
+    img.ready = RowsReady()
+    got = {}
+
+    def reader():
+        got["block"] = img.block(32, 48, 16, 32)
+
+    t = threading.Thread(target=reader)
+    t.start()
+    for k in range(0, len(idx), 100):  # filled in steps, as the sampling does
+        vals[k : k + 100] = final[k : k + 100]
+        img.ready.set(min(len(idx), k + 100))
+    t.join(5)
+    assert not t.is_alive()
+    want = np.asarray(HitImage(idx, final, (H, W, B)))[32:48, 16:32]
+    assert got["block"].tobytes() == want.tobytes()
+    img2 = HitImage(idx, np.zeros_like(final), (H, W, B))
+    img2.ready = RowsReady()
+    img2.ready.set(10)
+    img2.ready.fail()
+    assert img2.block(0, 1, 0, 4) is not None  # rows already final are served
+    with pytest.raises(Cancelled):
+        img2.block(32, 48, 16, 32)
+
+
+def test_streamed_cube_in_the_register_command(demo_dir, tmp_path, capsys, monkeypatch):
+    """The demo's cube kept at its hits (as the 4K cube is) and streamed into its TIFF while it is
+    sampled: the outputs are the sequential ones."""
+    monkeypatch.setattr(register_mod, "CUBE_HITS_BYTES", 1 << 20)
+    rig = Rig.load(demo_dir / "rig.json")
+    rec = Recording.load(demo_dir / "recording", rig)
+    streamed = []
+    real = register_mod._streamed_hits
+    monkeypatch.setattr(register_mod, "_streamed_hits", lambda *a, **k: streamed.append(a[6]) or real(*a, **k))
+    late = tmp_path / "late"
+    write_outputs(Registrar(rig, rec).register("rgb"), rig, rec, late)
+    assert not streamed
+    early = tmp_path / "early"
+    code = cli.main(["register", "--rig", str(demo_dir / "rig.json"), "--recording", str(demo_dir / "recording"),
+                     "--target", "rgb", "--out", str(early), "--quiet"])
+    capsys.readouterr()
+    assert code == 0 and streamed  # the cube went the streamed way
+    _same_outputs(late, early)

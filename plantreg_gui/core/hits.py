@@ -19,11 +19,47 @@ from typing import Any
 import numpy as np
 
 
+class RowsReady:
+    """How many leading rows of an array another thread is still filling are final: the filler
+    calls :meth:`set` (and :meth:`fail` if it stops), readers :meth:`wait`."""
+
+    def __init__(self) -> None:
+        import threading
+
+        self._n, self._failed = 0, False
+        self._cv = threading.Condition()
+
+    def set(self, n: int) -> None:
+        with self._cv:
+            self._n = max(self._n, int(n))
+            self._cv.notify_all()
+
+    def fail(self) -> None:
+        with self._cv:
+            self._failed = True
+            self._cv.notify_all()
+
+    def wait(self, n: int) -> None:
+        """Return once the first ``n`` rows are final; :class:`~.errors.Cancelled` if the filler failed."""
+        with self._cv:
+            while self._n < n and not self._failed:
+                self._cv.wait()
+            if self._n < n:
+                from .errors import Cancelled
+
+                raise Cancelled("the values were not completed")
+
+
 class HitImage:
     """(H, W) or (H, W, C) float32 image that is NaN except at the pixels ``index`` (M,) sorted
-    row-major indices, whose values are ``values`` (M, C) float32."""
+    row-major indices, whose values are ``values`` (M, C) float32.
+
+    ``ready``: while the registration still fills ``values`` (row by row, in index order), a
+    :class:`RowsReady`; :meth:`block` waits for the rows it reads (a TIFF writer runs alongside
+    the sampling); nothing else may read the values until then. None once complete."""
 
     __array_priority__ = 20
+    ready: RowsReady | None = None
 
     def __init__(self, index: np.ndarray, values: np.ndarray, shape: tuple[int, ...]):
         index = np.asarray(index, dtype=np.int64)
@@ -84,6 +120,9 @@ class HitImage:
         total = int(cnt.sum())
         if total == 0:
             return None
+        ready = self.ready  # read once: the filler sets it to None when done
+        if ready is not None:
+            ready.wait(int(hi[-1]))
         h, w = r1 - r0, c1 - c0
         # row by row: a row's hits are the run values[lo:hi] (sorted index), so a full row is one
         # slice copy and a partial one a small scatter -- no gather of all the block's hits and

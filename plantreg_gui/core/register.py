@@ -180,7 +180,8 @@ def _sample_threads(n: int, C: int) -> int:
 
 
 def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None = None, *,
-                    out: np.ndarray | None = None, rows: np.ndarray | None = None) -> np.ndarray:
+                    out: np.ndarray | None = None, rows: np.ndarray | None = None,
+                    done: Callable[[int], None] | None = None, threads: int | None = None) -> np.ndarray:
     """Bilinear samples of ``image`` (h, w) or (h, w, C), any dtype, at pixel positions ``uv``
     (N, 2) (pixel centres at integers) -> (N,) or (N, C) float32. NaN rows of ``uv`` give NaN.
 
@@ -195,6 +196,10 @@ def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None
     cube, reading each pixel's spectrum contiguously; band-sequential cubes (ENVI BSQ loads as a
     (h, w, C) view of a (C, h, w) array) are gathered a few bands at a time so that each band
     stays in cache. No copy of the cube is made in either layout.
+
+    ``done(k)``, with ``out`` and ascending ``rows``: called on this thread whenever the first
+    ``k`` rows of ``out`` are final (a reader may take them while the rest is sampled).
+    ``threads``: sampling threads for a band-sequential cube (default :func:`_sample_threads`).
     """
     progress = ensure_reporter(progress)
     img = np.asarray(image)
@@ -226,7 +231,15 @@ def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None
     step = _sample_chunk_rows(C)
     du = 1 if w > 1 else 0
     dv = w if h > 1 else 0
-    n_threads = _sample_threads(len(ok), C) if band_first else 1
+    n_threads = (threads or _sample_threads(len(ok), C)) if band_first else 1
+    ascending = rows is not None and (len(rows_all) < 2 or bool(np.all(rows_all[1:] > rows_all[:-1])))
+    if done is not None and band_first:
+        step = min(step, 4 * _BAND_ROWS)  # a reader waits for at most ~13 MB of a 204-band cube
+
+    def report(a: int) -> None:  # chunk ``a`` (and every one before it) is written
+        if done is not None and ascending:
+            end = min(a + step, len(ok))
+            done(len(out) if end == len(ok) else int(rows_all[ok[end]]))
     if n_threads > 1:  # chunks small enough that every thread gets several (load balance)
         per = -(-len(ok) // (4 * n_threads))
         step = min(step, max(_BAND_ROWS, -(-per // _BAND_ROWS) * _BAND_ROWS))
@@ -277,6 +290,9 @@ def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None
         for a in starts:
             progress(a / max(1, len(ok)))
             chunk(a)
+            report(a)
+        if done is not None:
+            done(len(out))
         return out[:, 0] if squeeze else out
     # band-sequential cubes: chunks in threads (numpy's take, einsum and the scatter release the
     # GIL); progress and cancellation stay on this thread; chunks write disjoint rows of ``out``
@@ -288,9 +304,12 @@ def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None
             for a, f in zip(starts, futures):
                 progress(a / max(1, len(ok)))
                 f.result()
+                report(a)
         except BaseException:
             ex.shutdown(wait=True, cancel_futures=True)
             raise
+    if done is not None:
+        done(len(out))
     return out[:, 0] if squeeze else out
 
 
@@ -610,10 +629,20 @@ class Registrar:
                     # at the hits only; sample_bilinear writes NaN only where no sample goes (a
                     # full NaN pass first cost ~0.5 s for the 1 GB of a 204-band cube in a 4K view)
                     vals = np.empty((len(obj_idx), C), dtype=np.float32)
-                    sample_bilinear(img, uvh[in_idx], progress.sub(a + 0.5 * (b - a), b), out=vals, rows=in_idx)
-                    registered[scam.name] = _registered_image(obj_idx, vals, H, W, img)
-                    if on_image is not None:
-                        on_image(scam.name, registered[scam.name])
+                    sub = progress.sub(a + 0.5 * (b - a), b)
+                    if on_image is not None and keep_at_hits(H, W, C):
+                        # a cube kept at its hits is handed over before it is sampled: its TIFF
+                        # is encoded on the other core while the values are filled in, tile rows
+                        # as soon as they are final (HitImage.ready); one sampling thread then
+                        registered[scam.name] = _streamed_hits(obj_idx, vals, H, W, img, on_image, scam.name,
+                                                               lambda done: sample_bilinear(
+                                                                   img, uvh[in_idx], sub, out=vals, rows=in_idx,
+                                                                   done=done, threads=1))
+                    else:
+                        sample_bilinear(img, uvh[in_idx], sub, out=vals, rows=in_idx)
+                        registered[scam.name] = _registered_image(obj_idx, vals, H, W, img)
+                        if on_image is not None:
+                            on_image(scam.name, registered[scam.name])
 
         timings["total"] = time.perf_counter() - t_start
         # the rig's camera order again (the outputs list cameras in it)
@@ -687,6 +716,26 @@ def _registered_image(obj_idx: np.ndarray, vals: np.ndarray, H: int, W: int, img
     dense = nan_array((H * W, C))
     dense[obj_idx] = vals
     return _shape_values(dense, H, W, img)
+
+
+def _streamed_hits(obj_idx: np.ndarray, vals: np.ndarray, H: int, W: int, img: np.ndarray,
+                   on_image: Callable[[str, Any], None], cam: str, fill: Callable[[Callable[[int], None]], Any]):
+    """The HitImage of ``vals`` (M, C) at ``obj_idx``, given to ``on_image`` *before* ``fill(done)``
+    writes its values (``done(k)``: the first k rows are final); its ``block`` waits for them."""
+    from .hits import HitImage, RowsReady
+
+    C = vals.shape[1]
+    out = HitImage(obj_idx, vals, (H, W) if img.ndim == 2 or C == 1 else (H, W, C))
+    assert np.may_share_memory(out.values, vals)  # obj_idx is ascending: no reordering copy
+    out.ready = RowsReady()
+    on_image(cam, out)
+    try:
+        fill(out.ready.set)
+    except BaseException:
+        out.ready.fail()  # a waiting reader stops (Cancelled) instead of waiting for ever
+        raise
+    out.ready = None
+    return out
 
 
 def _shape_values(vals: np.ndarray, H: int, W: int, img: np.ndarray) -> np.ndarray:
