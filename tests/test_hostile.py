@@ -927,3 +927,25 @@ def test_batch_empty_out_and_missing_recording(tmp_path, capsys):
     captured = capsys.readouterr()
     assert code == 1 and "Traceback" not in captured.err
     assert "nowhere" in captured.err + captured.out
+
+
+def test_closed_stdout_pipe_exits_quietly(tmp_path):
+    """``plantreg ... | head -0``: the reader of stdout is gone before the command prints. The command's
+    work is done (here: recording.json written and valid); it stops quietly with SIGPIPE's status
+    (128 + 13), no 'error' line and no traceback -- as Unix tools do."""
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    cv2.imwrite(str(rec / "depth.png"), np.full((24, 32), 800, np.uint16))
+    cv2.imwrite(str(rec / "ir.png"), np.full((24, 32), 90, np.uint8))
+    r_fd, w_fd = os.pipe()
+    os.close(r_fd)  # nobody will read
+    try:
+        p = subprocess.run([sys.executable, "-m", "plantreg_gui", "recording", "create", str(rec),
+                            "--depth", str(rec / "depth.png"), "--image", f"ir={rec / 'ir.png'}"],
+                           env=_env(), stdout=w_fd, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(w_fd)
+    assert p.returncode == 128 + signal.SIGPIPE, (p.returncode, p.stderr)
+    assert p.stderr == ""
+    doc = json.loads((rec / "recording.json").read_text())
+    assert doc["depth"] == "depth.png" and doc["images"]["ir"] == "ir.png"

@@ -103,6 +103,21 @@ def _install_signal_handlers() -> dict:
     return old
 
 
+def _silence_stdio() -> None:
+    """Point stdout/stderr at /dev/null: after a reader closed the pipe, the interpreter's own
+    flush at exit would otherwise report the broken pipe once more."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                os.dup2(null, stream.fileno())
+            except (OSError, ValueError, AttributeError):  # not a file (captured in a test)
+                pass
+        os.close(null)
+    except OSError:  # pragma: no cover - no /dev/null
+        pass
+
+
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The command line's parser. With ``argv`` naming a subcommand first (``register ...``), only
     that subcommand's module is imported and its parser built (the others' modules are not
@@ -144,6 +159,11 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError:
         print("plantreg: error: out of memory", file=sys.stderr)
         return 1
+    except BrokenPipeError:
+        # whoever read our output went away (`plantreg ... | head`): stop quietly with SIGPIPE's
+        # status, as Unix tools do; outputs are complete (printed after) or never moved into place
+        _silence_stdio()
+        return 128 + signal.SIGPIPE
     except OSError as e:  # disk full, no permission, a file where a folder should be: name it, no traceback
         where = f"{e.filename}: " if e.filename else ""
         print(f"plantreg: error: {where}{e.strerror or e}", file=sys.stderr)

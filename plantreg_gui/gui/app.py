@@ -79,7 +79,11 @@ def main(argv: list[str] | None = None) -> int:
         show_error(win, "Cannot open", str(e))
     if args.screenshot:
         win.screenshot_when_idle(args.screenshot, args.timeout, done=app.exit)
-    return app.exec()
+    rc = app.exec()
+    # the views' teardown (workers, 3D plotters) also when the loop ended without closing the
+    # window (--screenshot, app.exit): else pyvistaqt closes a plotter whose timer Qt already deleted
+    win.close()
+    return rc
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -19,7 +19,7 @@ from .model import case_table
 
 
 #: overlay colours of the other masks: red mixed edge pixels, blue flying pixels
-EXTRA_COLOURS = {"mixed edge pixels": (255, 40, 40), "flying pixels removed": (60, 120, 255)}
+EXTRA_COLOURS = {"mixed edge pixels": (255, 40, 40), "flying pixels": (60, 120, 255)}
 
 
 class Legend(QTableWidget):

@@ -587,8 +587,10 @@ class RegistrationSession:
                         f"P1 pixels whose footprint in {self.masks_source} reaches across a silhouette"))
         flying = getattr(r, "flying", None)
         if flying is not None and flying.shape == r.shape:
-            out.append(("flying pixels removed", np.asarray(flying, bool),
-                        "depth pixels between two surfaces, removed before meshing"))
+            repaired = self.params is None or getattr(self.params, "flying_repair", True)
+            out.append(("flying pixels", np.asarray(flying, bool),
+                        "depth pixels between two surfaces, " + (
+                            "moved onto the surface they mostly saw" if repaired else "removed") + " before meshing"))
         return out
 
     def colour_bar(self, L: Layer) -> tuple[str | None, tuple[float, float] | None, str]:

@@ -1,0 +1,105 @@
+"""Where a batch recording's CPU goes, against the raw Open3D ray-casting budget (issue 10's "batch
+<= 3x the ray-casting budget").
+
+    .venv/bin/python benchmarks/bench_budget.py [--data DIR] [--repeat 5]
+
+In one warm process (libraries loaded, as in a batch worker), for the paper-sized recording of
+bench_batch.py / bench_register.py (rendered once into ``--data``, not timed), per recording:
+CPU time (user + system, all threads) of reading it (``Recording.load``), of registering it
+into the infrared view (``Registrar.register``; of which inside Open3D: BVH builds, casts,
+occlusion tests) and of writing the default outputs (``write_outputs``) -- best of ``--repeat``.
+
+Printed: the split, and the floor that reading and writing alone put on a batch on 2 cores
+((read + write CPU) / 2) as a multiple of the Open3D budget: a batch cannot get below it
+whatever the registration costs, unless it writes less (``--outputs``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "plantreg-bench-paper")
+    ap.add_argument("--repeat", type=int, default=5)
+    args = ap.parse_args()
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    sys.path.insert(0, str(ROOT))
+    from plantreg_gui import prefer_one_blas_thread
+
+    prefer_one_blas_thread()  # as the CLI and batch workers do
+    from bench_register import _prepare  # type: ignore[import-not-found]
+
+    from plantreg_gui.core import raycast
+    from plantreg_gui.core.export import write_outputs
+    from plantreg_gui.core.recording import Recording
+    from plantreg_gui.core.register import Registrar
+    from plantreg_gui.core.rig import Rig
+
+    _prepare(args.data)
+    spent = [0.0]
+
+    def timed(f):
+        def g(*a, **k):
+            t = time.perf_counter()
+            try:
+                return f(*a, **k)
+            finally:
+                spent[0] += time.perf_counter() - t
+        return g
+
+    raycast.MeshScene.__init__ = timed(raycast.MeshScene.__init__)
+    raycast.MeshScene.cast = timed(raycast.MeshScene.cast)
+    raycast.MeshScene.occluded = timed(raycast.MeshScene.occluded)
+
+    rig = Rig.load(args.data / "rig.json")
+    work = Path(tempfile.mkdtemp(prefix="plantreg-bench-budget-"))
+    rows = []
+    try:
+        for k in range(args.repeat + 1):  # the first round warms up
+            c0 = _cpu()
+            rec = Recording.load(args.data / "recording", rig)
+            c1 = _cpu()
+            spent[0] = 0.0
+            res = Registrar(rig, rec).register("ir")
+            c2 = _cpu()
+            o3d = spent[0]
+            out = work / f"out{k}"
+            write_outputs(res, rig, rec, out)
+            c3 = _cpu()
+            shutil.rmtree(out)
+            if k:
+                rows.append((c1 - c0, c2 - c1, o3d, c3 - c2))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    read, reg, o3d, write = (min(r[i] for r in rows) for i in range(4))
+    cores = 2
+    floor = (read + write) / cores
+    print(f"paper rig, infrared target; best of {args.repeat} per part; load average {os.getloadavg()[0]:.1f}")
+    print(f"  read     {read:5.2f} s CPU")
+    print(f"  register {reg:5.2f} s CPU  (inside Open3D: {o3d:.3f} s wall = the budget)")
+    print(f"  write    {write:5.2f} s CPU  (default outputs)")
+    print(f"  total    {read + reg + write:5.2f} s CPU -> {(read + reg + write) / cores:.2f} s per recording on "
+          f"{cores} cores at best = {(read + reg + write) / cores / o3d:.1f}x the budget")
+    print(f"  reading + writing alone: {floor:.2f} s per recording on {cores} cores = {floor / o3d:.1f}x the budget "
+          f"(issue: batch <= 3x)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
