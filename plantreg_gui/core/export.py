@@ -100,8 +100,7 @@ def _wait_background(ctx: ExportContext, rep: Reporter, fraction: float) -> None
     """Wait for the files written in the background (their errors are raised here)."""
     if ctx.background is not None and ctx.background.pending():
         rep(fraction, "writing registered images")
-        for key, seconds in ctx.background.wait().items():
-            ctx.timings[key] = ctx.timings.get(key, 0.0) + seconds
+        ctx.timings["registered"] = ctx.timings.get("registered", 0.0) + ctx.background.wait()
 
 
 def _write_preview(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
@@ -123,15 +122,8 @@ def _write_areas(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
 
 def _write_pointcloud(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
     colour_cam = _colour_camera(ctx.result, ctx.rig)
-    colours = None if colour_cam is None else ctx.preview(colour_cam)  # on this thread: the preview cache is its own
-    ctx.timings.setdefault(kind, 0.0)
-
-    def write() -> float:  # in the background, beside the TIFFs (no progress calls from there)
-        t0 = time.perf_counter()
-        write_ply(ctx.folder / "pointcloud.ply", ctx.result, ctx.cams, colours)
-        return time.perf_counter() - t0
-
-    ctx.background.submit(write, key=kind)
+    write_ply(ctx.folder / "pointcloud.ply", ctx.result, ctx.cams,
+              None if colour_cam is None else ctx.preview(colour_cam), rep)
     return "pointcloud.ply"
 
 
@@ -403,33 +395,27 @@ def _hit_tiles(reg: HitImage) -> Callable[[int, int, int, int], np.ndarray | Non
 
 
 class _Background:
-    """Two background threads for output files, as a context: leaving it (also by an exception
+    """One background thread for output files, as a context: leaving it (also by an exception
     or a cancel) cancels what has not started and waits for what runs, so that no file is
-    written into a folder that is being removed. Two: the point cloud is written beside the
-    registered TIFFs (a 4K target's 0.6 GB PLY would otherwise wait for the cube's deflate, or
-    hold up this thread's previews)."""
+    written into a folder that is being removed."""
 
     def __enter__(self) -> "_Background":
         from concurrent.futures import ThreadPoolExecutor
 
-        self._pool = ThreadPoolExecutor(2, thread_name_prefix="plantreg-write")
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="plantreg-write")
         self._futures: list = []
         return self
 
-    def submit(self, fn, *args, key: str = "registered") -> None:
-        """Run ``fn(*args)`` (it returns the seconds it took, reported under ``key``)."""
-        self._futures.append((key, self._pool.submit(fn, *args)))
+    def submit(self, fn, *args) -> None:
+        self._futures.append(self._pool.submit(fn, *args))
 
     def pending(self) -> bool:
         return bool(self._futures)
 
-    def wait(self) -> dict[str, float]:
-        """Wait for every submitted call (in order; the first error is raised); seconds per key."""
+    def wait(self) -> float:
+        """Wait for every submitted call (in order; the first error is raised); sum of their results."""
         futures, self._futures = self._futures, []
-        out: dict[str, float] = {}
-        for key, f in futures:
-            out[key] = out.get(key, 0.0) + float(f.result())
-        return out
+        return float(sum(f.result() for f in futures))
 
     def __exit__(self, *exc) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
