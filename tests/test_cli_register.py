@@ -209,6 +209,7 @@ def test_os_error_while_writing_is_one_line(tmp_path, capsys, monkeypatch):
     code = cli.main(_args(rig, rec, out))
     err = capsys.readouterr().err
     assert code == 1 and "No space left" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert str(out / "registered") in err  # the user's path, not a staging folder's
     assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]
 
 
@@ -267,7 +268,7 @@ class _FakeRegistrar:
     def __init__(self, rig, recording, params=None):
         _FakeRegistrar.seen = {"rig": rig, "recording": recording, "params": params}
 
-    def register(self, target, progress=None):
+    def register(self, target, progress=None, on_image=None):
         progress(0.5, "fake registration")
         _FakeRegistrar.seen["target"] = target
         rig = _FakeRegistrar.seen["rig"]
@@ -289,6 +290,9 @@ class _FakeRegistrar:
                 k[0, w // 2: w // 2 + 6] = 2   # 6 pixels P2
                 cases[c.name] = k
         area = np.where(obj, 4, 6).astype(np.uint8)
+        for c, img in reg.items():  # as the engine does: each image as soon as it is made
+            if on_image is not None:
+                on_image(c, img)
         return register_mod.RegistrationResult(target, pts, area, reg, {}, cases, self.seen["params"],
                                                timings={"raycast": 0.001})
 

@@ -115,7 +115,9 @@ def registration_params(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from .. import cli
-    from ..core.export import check_output_spares_inputs, parse_outputs, write_outputs
+    from contextlib import nullcontext
+
+    from ..core.export import EarlyTiffs, check_output_spares_inputs, parse_outputs, write_outputs
     from ..core.imageio import check_output_location
     from ..core.recording import Recording
     from ..core.register import AREA_P4, AREA_P5, AREA_P6, Registrar
@@ -136,18 +138,23 @@ def run(args: argparse.Namespace) -> int:
     # open3d_core() call waits for the load); joined always, so no error exits mid-load
     loading: list = []
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
-    try:
-        recording = Recording.load(args.recording, rig, while_decoding=lambda: loading.append(load_in_background()))
-        result = Registrar(rig, recording, params).register(args.target, progress.sub(0.0, 0.85))
-    finally:
-        for t in loading:
-            t.join()
-    if args.drop_mixed:
-        drop_mixed(result)
-    write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0), what=what,
-                  tiff_codec=args.tiff_codec,
-                  inputs={"rig": rig_path.resolve(), "recording": Path(args.recording).resolve(),
-                          "command": _command_line(args)})
+    # the registered TIFFs are encoded as soon as each image is made, on the core the
+    # registration leaves idle (export.EarlyTiffs); not with --drop-mixed, which changes them after
+    early = EarlyTiffs(out, args.tiff_codec) if "registered" in what and not args.drop_mixed else None
+    with early or nullcontext():
+        try:
+            recording = Recording.load(args.recording, rig, while_decoding=lambda: loading.append(load_in_background()))
+            result = Registrar(rig, recording, params).register(args.target, progress.sub(0.0, 0.85),
+                                                                on_image=early)
+        finally:
+            for t in loading:
+                t.join()
+        if args.drop_mixed:
+            drop_mixed(result)
+        write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0),
+                      what=what, tiff_codec=args.tiff_codec, early=early,
+                      inputs={"rig": rig_path.resolve(), "recording": Path(args.recording).resolve(),
+                              "command": _command_line(args)})
 
     H, W = result.shape
     n = H * W

@@ -66,6 +66,7 @@ class ExportContext:
     written: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     background: Any = None  # _Background: files encoded in a thread while the others are made
+    early: Any = None  # EarlyTiffs: registered TIFFs already being encoded during the registration
     summary_draft: dict[str, Any] | None = None  # summary.json but its timings (_summary_draft)
 
 
@@ -88,7 +89,10 @@ def _write_registered(ctx: ExportContext, kind: str, cam: str, rep: Reporter) ->
     # here (the codecs release the GIL); waited for before the summary (_wait_background)
     rel = f"registered/{_safe(cam)}.tif"
     ctx.timings.setdefault(kind, 0.0)
-    ctx.background.submit(_write_registered_tiff, ctx.folder / rel, ctx.result.registered[cam], ctx.tiff_codec)
+    if ctx.early is not None and ctx.early.has(cam, ctx.result.registered[cam], ctx.tiff_codec):
+        ctx.background.submit(ctx.early.take, cam, ctx.folder / rel)  # waits for it, moves it in
+    else:
+        ctx.background.submit(_write_registered_tiff, ctx.folder / rel, ctx.result.registered[cam], ctx.tiff_codec)
     return rel
 
 
@@ -219,6 +223,7 @@ def write_outputs(
     display_options: Mapping[str, Mapping[str, Any]] | None = None,
     tiff_codec: str = TIFF_CODEC_DEFAULT,
     mosaic_tile: int | None = None,
+    early: "EarlyTiffs | None" = None,
 ) -> Path:
     """Write ``result`` into the folder ``out`` (layout in the module docstring); returns ``out``.
 
@@ -229,7 +234,8 @@ def write_outputs(
     the mosaic and the point-cloud colours, so an export looks like the GUI's view.
     ``tiff_codec``: the registered TIFFs' lossless compression (:data:`~.imageio.TIFF_CODECS`).
     ``mosaic_tile`` the mosaic's tile size in pixels (default :func:`display.default_tile`; the
-    workspace passes its screen's tile).
+    workspace passes its screen's tile). ``early``: registered TIFFs whose encoding started during
+    the registration (:class:`EarlyTiffs`); those are moved in instead of encoded again.
 
     Raises :class:`InputError` if ``out`` exists and is not empty and ``overwrite`` is False;
     :class:`~plantreg_gui.core.errors.Cancelled` if cancelled through ``progress`` (nothing is
@@ -264,7 +270,7 @@ def write_outputs(
     check_output_spares_inputs(out, keep)
     with atomic_output_dir(out, overwrite) as tmp, _Background() as background:
         ctx = ExportContext(tmp, result, rig, recording, cams, preview, tiff_codec, mosaic_tile, inputs, t_start,
-                            background=background)
+                            background=background, early=early)
         done = 0.0
         for part, step, weight in steps:
             kind, _, cam = step.partition(":")
@@ -285,15 +291,88 @@ def write_outputs(
     return out
 
 
-def _write_registered_tiff(path: Path, reg: Any, codec: str) -> float:
-    """One ``registered/<camera>.tif`` (tiled, compressed, empty tiles encoded once); seconds taken."""
+def _write_registered_tiff(path: Path, reg: Any, codec: str, stop: Any = None) -> float:
+    """One ``registered/<camera>.tif`` (tiled, compressed, empty tiles encoded once); seconds taken.
+    ``stop`` (a threading.Event): set, the writing ends with :class:`~.errors.Cancelled` (no file)."""
     t0 = time.perf_counter()
     if isinstance(reg, HitImage):  # expanded tile by tile, never as a whole
-        write_tiff_tiled(path, reg.shape, np.float32, _hit_tiles(reg), codec=codec)
+        shape, tile_of = reg.shape, _hit_tiles(reg)
     else:
         reg = np.asarray(reg, dtype=np.float32)
-        write_tiff_tiled(path, reg.shape, np.float32, dense_tiles(reg), codec=codec)
+        shape, tile_of = reg.shape, dense_tiles(reg)
+    if stop is not None:
+        inner = tile_of
+
+        def tile_of(r0: int, r1: int, c0: int, c1: int):  # noqa: F811 - the same with a stop check
+            if stop.is_set():
+                from .errors import Cancelled
+
+                raise Cancelled("stopped")
+            return inner(r0, r1, c0, c1)
+    write_tiff_tiled(path, shape, np.float32, tile_of, codec=codec)
     return time.perf_counter() - t0
+
+
+class EarlyTiffs:
+    """``registered/<camera>.tif`` files encoded in a background thread while the registration
+    still runs, as a context: pass it as ``on_image`` to :meth:`~.register.Registrar.register`
+    and as ``early`` to :func:`write_outputs`, which moves the files into its folder.
+
+    Why: registering into a 4K view keeps one core busy for seconds while the other idles, and
+    then the export is bound by deflating the 204-band cube's ~0.8 GB of hit values on both
+    cores; sources are registered cube first (``register``), so its TIFF is encoded while the
+    other sources are registered. The files are the ones :func:`write_outputs` would write (the
+    same function, from the same arrays, which must not change in between). They are staged in a
+    hidden ``.<out>.XXXX.part`` folder beside ``out``; leaving the context (also by an error)
+    stops the encoding and removes that folder.
+    """
+
+    def __init__(self, out: str | Path, codec: str = TIFF_CODEC_DEFAULT):
+        self.out, self.codec = Path(out), codec
+        self._jobs: dict[str, tuple[Any, Any, Path]] = {}  # camera -> (image, future, staged path)
+
+    def __enter__(self) -> "EarlyTiffs":
+        import tempfile
+        import threading
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.out.parent.mkdir(parents=True, exist_ok=True)
+        self._dir = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.", suffix=".part", dir=self.out.parent))
+        self._stop = threading.Event()
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="plantreg-early")
+        return self
+
+    def __call__(self, cam: str, image: Any) -> None:
+        path = self._dir / f"{_safe(cam)}.tif"
+        if cam not in self._jobs:
+            self._jobs[cam] = (image, self._pool.submit(_write_registered_tiff, path, image, self.codec, self._stop),
+                               path)
+
+    def has(self, cam: str, image: Any, codec: str) -> bool:
+        """Whether ``cam``'s TIFF of this very ``image`` in ``codec`` is (being) encoded here."""
+        return cam in self._jobs and self._jobs[cam][0] is image and codec == self.codec
+
+    def take(self, cam: str, dest: Path) -> float:
+        """Wait for ``cam``'s TIFF (its error is raised here) and move it to ``dest``; seconds encoding took."""
+        import os
+
+        from .imageio import _renamed
+
+        _image, fut, path = self._jobs.pop(cam)
+        try:
+            seconds = fut.result()
+        except OSError as e:  # named as the file the user gets (write_outputs names it under OUT)
+            raise _renamed(e, path, dest) from None
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(path, dest)
+        return seconds
+
+    def __exit__(self, *exc) -> None:
+        import shutil
+
+        self._stop.set()
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        shutil.rmtree(self._dir, ignore_errors=True)
 
 
 def _hit_tiles(reg: HitImage) -> Callable[[int, int, int, int], np.ndarray | None]:
@@ -676,5 +755,5 @@ def _step_label(kind: str, cam: str) -> str:
                "mosaic": "mosaic.png", "summary": "summary.json"}.get(kind, kind))
 
 
-__all__ = ["OUTPUTS", "OUTPUT_PARTS", "OutputPart", "parse_outputs", "write_outputs", "write_ply", "build_summary",
+__all__ = ["EarlyTiffs", "OUTPUTS", "OUTPUT_PARTS", "OutputPart", "parse_outputs", "write_outputs", "write_ply", "build_summary",
            "ply_property_names"]

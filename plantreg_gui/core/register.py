@@ -38,7 +38,7 @@ import hashlib
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -165,8 +165,23 @@ def _sample_chunk_rows(n_channels: int) -> int:
     return int(min(RAY_CHUNK, max(1 << 14, (64 << 20) // (4 * max(1, n_channels)))))
 
 
+#: Threads that sample a band-sequential cube (``sample_bilinear``); 1 = the calling thread only.
+#: None: the cores (at most 2) when there are at least :data:`_THREAD_MIN_VALUES` values to sample.
+SAMPLE_THREADS: int | None = None
+_THREAD_MIN_VALUES = 1 << 24
+
+
+def _sample_threads(n: int, C: int) -> int:
+    import os
+
+    if SAMPLE_THREADS is not None:
+        return max(1, int(SAMPLE_THREADS))
+    return min(2, os.cpu_count() or 1) if n * C >= _THREAD_MIN_VALUES else 1
+
+
 def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None = None, *,
-                    out: np.ndarray | None = None, rows: np.ndarray | None = None) -> np.ndarray:
+                    out: np.ndarray | None = None, rows: np.ndarray | None = None,
+                    done: Callable[[int], None] | None = None, threads: int | None = None) -> np.ndarray:
     """Bilinear samples of ``image`` (h, w) or (h, w, C), any dtype, at pixel positions ``uv``
     (N, 2) (pixel centres at integers) -> (N,) or (N, C) float32. NaN rows of ``uv`` give NaN.
 
@@ -181,6 +196,10 @@ def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None
     cube, reading each pixel's spectrum contiguously; band-sequential cubes (ENVI BSQ loads as a
     (h, w, C) view of a (C, h, w) array) are gathered a few bands at a time so that each band
     stays in cache. No copy of the cube is made in either layout.
+
+    ``done(k)``, with ``out`` and ascending ``rows``: called on this thread whenever the first
+    ``k`` rows of ``out`` are final (a reader may take them while the rest is sampled).
+    ``threads``: sampling threads for a band-sequential cube (default :func:`_sample_threads`).
     """
     progress = ensure_reporter(progress)
     img = np.asarray(image)
@@ -212,8 +231,20 @@ def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None
     step = _sample_chunk_rows(C)
     du = 1 if w > 1 else 0
     dv = w if h > 1 else 0
-    for a in range(0, len(ok), step):
-        progress(a / max(1, len(ok)))
+    n_threads = (threads or _sample_threads(len(ok), C)) if band_first else 1
+    ascending = rows is not None and (len(rows_all) < 2 or bool(np.all(rows_all[1:] > rows_all[:-1])))
+    if done is not None and band_first:
+        step = min(step, 4 * _BAND_ROWS)  # a reader waits for at most ~13 MB of a 204-band cube
+
+    def report(a: int) -> None:  # chunk ``a`` (and every one before it) is written
+        if done is not None and ascending:
+            end = min(a + step, len(ok))
+            done(len(out) if end == len(ok) else int(rows_all[ok[end]]))
+    if n_threads > 1:  # chunks small enough that every thread gets several (load balance)
+        per = -(-len(ok) // (4 * n_threads))
+        step = min(step, max(_BAND_ROWS, -(-per // _BAND_ROWS) * _BAND_ROWS))
+
+    def chunk(a: int) -> None:
         sel = ok[a : a + step]
         u = np.clip(uv[sel, 0].astype(np.float64), 0, w - 1)
         v = np.clip(uv[sel, 1].astype(np.float64), 0, h - 1)
@@ -238,7 +269,7 @@ def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None
                     g = np.take(blk, idx[:, t0:t1], axis=1).astype(np.float32, copy=False)  # (nb, 4, rows)
                     np.einsum("bkm,km->bm", g, wts[:, t0:t1], out=A[b0 : b0 + 4])
                 out[dst[t0:t1]] = A.T
-            continue
+            return
         if C <= 4:
             acc = flat[i00].astype(np.float32) * w00[:, None]
             acc += flat[i00 + du] * w01[:, None]
@@ -253,6 +284,32 @@ def sample_bilinear(image: np.ndarray, uv: np.ndarray, progress: Reporter | None
             M = sp.csr_matrix((wts, cols, np.arange(0, 4 * m + 1, 4)), shape=(m, h * w))
             acc = M @ flat
         out[dst] = acc
+
+    starts = range(0, len(ok), step)
+    if n_threads <= 1:
+        for a in starts:
+            progress(a / max(1, len(ok)))
+            chunk(a)
+            report(a)
+        if done is not None:
+            done(len(out))
+        return out[:, 0] if squeeze else out
+    # band-sequential cubes: chunks in threads (numpy's take, einsum and the scatter release the
+    # GIL); progress and cancellation stay on this thread; chunks write disjoint rows of ``out``
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(n_threads, thread_name_prefix="plantreg-sample") as ex:
+        try:
+            futures = [ex.submit(chunk, a) for a in starts]
+            for a, f in zip(starts, futures):
+                progress(a / max(1, len(ok)))
+                f.result()
+                report(a)
+        except BaseException:
+            ex.shutdown(wait=True, cancel_futures=True)
+            raise
+    if done is not None:
+        done(len(out))
     return out[:, 0] if squeeze else out
 
 
@@ -448,7 +505,17 @@ class Registrar:
                 self.recording.paths.get("depth", self.recording.folder),
             )
 
-    def register(self, target: str, progress: Reporter | None = None) -> RegistrationResult:
+    def register(self, target: str, progress: Reporter | None = None,
+                 on_image: Callable[[str, Any], None] | None = None) -> RegistrationResult:
+        """Register every camera into ``target``'s view (module docstring).
+
+        ``on_image(camera, image)``, if given, is called as soon as a camera's registered image
+        (the ``registered[camera]`` of the result, not to be changed) is complete, on this thread,
+        so that a caller can start writing it while the other sources are still being registered
+        (``plantreg register`` encodes the TIFFs early: :class:`~.export.EarlyTiffs`).
+        Sources with more channels are registered first (a cube's TIFF is the longest to write);
+        the result's dicts keep the rig's camera order.
+        """
         progress = ensure_reporter(progress)
         tcam = self.rig.camera(target)
         timings: dict[str, float] = {}
@@ -501,6 +568,8 @@ class Registrar:
 
         images = self.recording.images
         cams = [c for c in self.rig.cameras if c.name != target]
+        rig_order = [c.name for c in cams]
+        cams.sort(key=lambda c: -_channels(images.get(c.name)))  # stable: rig order among equals
         registered: dict[str, np.ndarray] = {}
         source_uv: dict[str, np.ndarray] = {}
         cases: dict[str, np.ndarray] = {}
@@ -518,6 +587,8 @@ class Registrar:
                 C = 1 if img.ndim == 2 else int(np.prod(img.shape[2:]))
                 vals = img.reshape(N, C)[obj_idx].astype(np.float32)
                 registered[target] = _registered_image(obj_idx, vals, H, W, img)
+                if on_image is not None:
+                    on_image(target, registered[target])
 
         n = max(1, len(cams))
         for i, scam in enumerate(cams):
@@ -558,10 +629,26 @@ class Registrar:
                     # at the hits only; sample_bilinear writes NaN only where no sample goes (a
                     # full NaN pass first cost ~0.5 s for the 1 GB of a 204-band cube in a 4K view)
                     vals = np.empty((len(obj_idx), C), dtype=np.float32)
-                    sample_bilinear(img, uvh[in_idx], progress.sub(a + 0.5 * (b - a), b), out=vals, rows=in_idx)
-                    registered[scam.name] = _registered_image(obj_idx, vals, H, W, img)
+                    sub = progress.sub(a + 0.5 * (b - a), b)
+                    if on_image is not None and keep_at_hits(H, W, C):
+                        # a cube kept at its hits is handed over before it is sampled: its TIFF
+                        # is encoded on the other core while the values are filled in, tile rows
+                        # as soon as they are final (HitImage.ready); one sampling thread then
+                        registered[scam.name] = _streamed_hits(obj_idx, vals, H, W, img, on_image, scam.name,
+                                                               lambda done: sample_bilinear(
+                                                                   img, uvh[in_idx], sub, out=vals, rows=in_idx,
+                                                                   done=done, threads=1))
+                    else:
+                        sample_bilinear(img, uvh[in_idx], sub, out=vals, rows=in_idx)
+                        registered[scam.name] = _registered_image(obj_idx, vals, H, W, img)
+                        if on_image is not None:
+                            on_image(scam.name, registered[scam.name])
 
         timings["total"] = time.perf_counter() - t_start
+        # the rig's camera order again (the outputs list cameras in it)
+        registered = {c: registered[c] for c in [target, *rig_order] if c in registered}
+        source_uv = {c: source_uv[c] for c in [target, *rig_order] if c in source_uv}
+        cases, mixed = ({c: d[c] for c in rig_order if c in d} for d in (cases, mixed))
         stats = {
             "object_mesh": {"vertices": meshes.object.n_vertices, "triangles": meshes.object.n_triangles},
             "uncertainty_mesh": {"vertices": meshes.uncertainty.n_vertices,
@@ -604,6 +691,13 @@ CUBE_HITS_BYTES = 64 << 20
 CUBE_HITS_MAX_PIXELS = 1_000_000
 
 
+def _channels(img: np.ndarray | None) -> int:
+    """Channels of a raw image (H, W[, C...]); 0 for none."""
+    if img is None:
+        return 0
+    return 1 if img.ndim == 2 else int(np.prod(img.shape[2:]))
+
+
 def keep_at_hits(H: int, W: int, C: int) -> bool:
     """Whether a registered image (H, W, C) float32 is kept as a :class:`~.hits.HitImage`."""
     dense = H * W * C * 4
@@ -622,6 +716,26 @@ def _registered_image(obj_idx: np.ndarray, vals: np.ndarray, H: int, W: int, img
     dense = nan_array((H * W, C))
     dense[obj_idx] = vals
     return _shape_values(dense, H, W, img)
+
+
+def _streamed_hits(obj_idx: np.ndarray, vals: np.ndarray, H: int, W: int, img: np.ndarray,
+                   on_image: Callable[[str, Any], None], cam: str, fill: Callable[[Callable[[int], None]], Any]):
+    """The HitImage of ``vals`` (M, C) at ``obj_idx``, given to ``on_image`` *before* ``fill(done)``
+    writes its values (``done(k)``: the first k rows are final); its ``block`` waits for them."""
+    from .hits import HitImage, RowsReady
+
+    C = vals.shape[1]
+    out = HitImage(obj_idx, vals, (H, W) if img.ndim == 2 or C == 1 else (H, W, C))
+    assert np.may_share_memory(out.values, vals)  # obj_idx is ascending: no reordering copy
+    out.ready = RowsReady()
+    on_image(cam, out)
+    try:
+        fill(out.ready.set)
+    except BaseException:
+        out.ready.fail()  # a waiting reader stops (Cancelled) instead of waiting for ever
+        raise
+    out.ready = None
+    return out
 
 
 def _shape_values(vals: np.ndarray, H: int, W: int, img: np.ndarray) -> np.ndarray:
