@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import compileall
+import contextlib
 import json
 import os
 import resource
@@ -32,6 +33,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Iterator
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,12 +56,11 @@ def _prepare(data: Path, n: int) -> list[Path]:
     return recs
 
 
-def _raycast_budget(data: Path, repeat: int) -> float:
-    """Seconds inside Open3D for one registration (in this process, libraries already loaded)."""
+@contextlib.contextmanager
+def open3d_timer() -> Iterator[list[float]]:
+    """While active, ``spent[0]`` accumulates the wall seconds spent inside Open3D (BVH builds,
+    ``cast``, ``occluded`` of ``raycast.MeshScene``); reset it to 0 between runs."""
     from plantreg_gui.core import raycast
-    from plantreg_gui.core.recording import Recording
-    from plantreg_gui.core.register import Registrar
-    from plantreg_gui.core.rig import Rig
 
     spent = [0.0]
     o_init, o_cast, o_occ = raycast.MeshScene.__init__, raycast.MeshScene.cast, raycast.MeshScene.occluded
@@ -76,6 +77,18 @@ def _raycast_budget(data: Path, repeat: int) -> float:
     raycast.MeshScene.__init__, raycast.MeshScene.cast, raycast.MeshScene.occluded = \
         timed(o_init), timed(o_cast), timed(o_occ)
     try:
+        yield spent
+    finally:
+        raycast.MeshScene.__init__, raycast.MeshScene.cast, raycast.MeshScene.occluded = o_init, o_cast, o_occ
+
+
+def _raycast_budget(data: Path, repeat: int) -> float:
+    """Seconds inside Open3D for one registration (in this process, libraries already loaded)."""
+    from plantreg_gui.core.recording import Recording
+    from plantreg_gui.core.register import Registrar
+    from plantreg_gui.core.rig import Rig
+
+    with open3d_timer() as spent:
         rig = Rig.load(data / "rig.json")
         rec = Recording.load(data / "recording", rig)
         best = float("inf")
@@ -84,8 +97,6 @@ def _raycast_budget(data: Path, repeat: int) -> float:
             Registrar(rig, rec).register("ir")
             best = min(best, spent[0])
         return best
-    finally:
-        raycast.MeshScene.__init__, raycast.MeshScene.cast, raycast.MeshScene.occluded = o_init, o_cast, o_occ
 
 
 def _du(folder: Path) -> int:

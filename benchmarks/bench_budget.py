@@ -22,7 +22,6 @@ import resource
 import shutil
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,48 +42,34 @@ def main() -> int:
     from plantreg_gui import prefer_one_blas_thread
 
     prefer_one_blas_thread()  # as the CLI and batch workers do
+    from bench_batch import open3d_timer  # type: ignore[import-not-found]
     from bench_register import _prepare  # type: ignore[import-not-found]
 
-    from plantreg_gui.core import raycast
     from plantreg_gui.core.export import write_outputs
     from plantreg_gui.core.recording import Recording
     from plantreg_gui.core.register import Registrar
     from plantreg_gui.core.rig import Rig
 
     _prepare(args.data)
-    spent = [0.0]
-
-    def timed(f):
-        def g(*a, **k):
-            t = time.perf_counter()
-            try:
-                return f(*a, **k)
-            finally:
-                spent[0] += time.perf_counter() - t
-        return g
-
-    raycast.MeshScene.__init__ = timed(raycast.MeshScene.__init__)
-    raycast.MeshScene.cast = timed(raycast.MeshScene.cast)
-    raycast.MeshScene.occluded = timed(raycast.MeshScene.occluded)
-
     rig = Rig.load(args.data / "rig.json")
     work = Path(tempfile.mkdtemp(prefix="plantreg-bench-budget-"))
     rows = []
     try:
-        for k in range(args.repeat + 1):  # the first round warms up
-            c0 = _cpu()
-            rec = Recording.load(args.data / "recording", rig)
-            c1 = _cpu()
-            spent[0] = 0.0
-            res = Registrar(rig, rec).register("ir")
-            c2 = _cpu()
-            o3d = spent[0]
-            out = work / f"out{k}"
-            write_outputs(res, rig, rec, out)
-            c3 = _cpu()
-            shutil.rmtree(out)
-            if k:
-                rows.append((c1 - c0, c2 - c1, o3d, c3 - c2))
+        with open3d_timer() as spent:
+            for k in range(args.repeat + 1):  # the first round warms up
+                c0 = _cpu()
+                rec = Recording.load(args.data / "recording", rig)
+                c1 = _cpu()
+                spent[0] = 0.0
+                res = Registrar(rig, rec).register("ir")
+                c2 = _cpu()
+                o3d = spent[0]
+                out = work / f"out{k}"
+                write_outputs(res, rig, rec, out)
+                c3 = _cpu()
+                shutil.rmtree(out)
+                if k:
+                    rows.append((c1 - c0, c2 - c1, o3d, c3 - c2))
     finally:
         shutil.rmtree(work, ignore_errors=True)
     read, reg, o3d, write = (min(r[i] for r in rows) for i in range(4))
