@@ -174,3 +174,32 @@ def test_sample_bilinear_band_sequential_cube(dtype):
     rest = np.ones(len(out), bool)
     rest[rows[7:]] = False
     assert np.isnan(out[rest]).all()  # rows without a sample (NaN uv, or not in rows) are NaN
+
+
+def test_occlusion_segments_skip_the_first_centimetre():
+    """``MeshScene.occluded(..., skip_m=)``: a triangle in a plane through the segments' origin (an
+    uncertainty curtain seen from the depth camera's centre) is never reported for segments that
+    graze it, while a real occluder further out is, and a segment shorter than the skip meets nothing."""
+    import numpy as np
+
+    # a curtain in the plane y = 0 from z = 0.4 to 1.0 m, and a leaf across z = 0.5 m
+    curtain = np.array([[-0.2, 0.0, 0.4], [0.2, 0.0, 0.4], [0.2, 0.0, 1.0], [-0.2, 0.0, 1.0]], np.float32)
+    leaf = np.array([[-0.05, 0.05, 0.5], [0.05, 0.05, 0.5], [0.0, 0.15, 0.5]], np.float32)
+    V = np.concatenate([curtain, leaf])
+    T = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6]], np.int32)
+    scene = raycast.MeshScene(V, T)
+    rng = np.random.default_rng(7)
+    # segments from the origin to points just off the curtain's plane (angles 1e-7..1e-3 rad)
+    ang = 10.0 ** rng.uniform(-7, -3, 2000) * rng.choice([-1, 1], 2000)
+    x = rng.uniform(-0.15, 0.15, 2000)
+    ends = np.stack([x, 0.9 * np.tan(ang), np.full(2000, 0.9)], axis=1).astype(np.float32)
+    hit = scene.occluded(np.zeros(3, np.float32), ends * 0.99, 1.0, skip_m=raycast.NEAR_CAMERA_M)
+    assert not hit.any()
+    # the leaf: a segment through it is occluded with the skip as without
+    through = np.array([[0.0, 0.09, 0.9]], np.float32) * np.float32(0.9 / 0.5)
+    assert scene.occluded(np.zeros(3, np.float32), through, 1.0, skip_m=raycast.NEAR_CAMERA_M).all()
+    assert scene.occluded(np.zeros(3, np.float32), through / np.linalg.norm(through), np.inf,
+                          skip_m=raycast.NEAR_CAMERA_M).all()
+    # shorter than the skip: nothing to test
+    assert not scene.occluded(np.zeros(3, np.float32), np.array([[0, 0, 0.005]], np.float32), 1.0,
+                              skip_m=raycast.NEAR_CAMERA_M).any()

@@ -465,3 +465,26 @@ def test_write_demo_is_realistic_by_default(tmp_path, monkeypatch):
             demo_mod.write_demo(tmp_path / f"d{clean}", calibration=False, clean=clean)
     assert seen == [(1.0, (0.001, 0.001), True), (None, (0.0, 0.0), False)]
     assert not list(tmp_path.iterdir())  # nothing half-written
+
+
+# ---------------------------------------------------------------------------- the depth camera as a source
+@pytest.mark.parametrize("seed", [11, 12])
+def test_depth_camera_as_a_source_sees_its_own_surface(seed):
+    """Registering into another camera, the depth camera's own pixels are never P3.2 where it truly
+    sees the point: its blind space (the uncertainty mesh's curtains, in planes through its centre)
+    cannot lie between it and its own surface. Segments starting exactly at its centre made
+    Embree report grazing hits there: 0.1-0.7 % of its P1 pixels were P3.2, all truly visible
+    (seeds 3, 5, 9 while fixing; these seeds were not looked at)."""
+    from plantreg_gui.core.synthetic.render import render_tof_depth
+
+    rig = demo_rig()
+    scene = make_plant_scene(seed)
+    depth = render_tof_depth(rig, scene, (0.001, 0.001), np.random.default_rng([seed, 0]))
+    rec = Recording(None, depth, {})
+    for target in ("thermal", "rgb"):
+        res = register(rig, rec, target)
+        gt = ground_truth(rig, scene, target)
+        cases = res.cases[rig.depth_camera]
+        p1 = (cases == CASE_P1).sum()
+        wrong = ((cases == CASE_P32) & gt.visible[rig.depth_camera]).sum()
+        assert wrong <= max(5, 1e-4 * p1), (target, int(wrong), int(p1))
