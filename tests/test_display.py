@@ -292,3 +292,36 @@ def test_pca_projection_of_a_run_of_rows_equals_the_gathered_rows():
     b = pca_scores(gap)
     assert np.isnan(b[0, 40_000]).all()
     assert np.array_equal(np.delete(b, 40_000, axis=1), a)
+
+
+def test_three_band_8bit_cube_is_drawn_as_rgb_raw_and_registered():
+    """A hyperspectral camera's own 3-band 8-bit rendering (the Plant3DImageReg 'hs' PNGs) was drawn
+    as a PCA false colour: a grey background came out green. It is RGB now, as recorded; its
+    registered version (float32, NaN where not mapped) too, with the hues kept."""
+    from plantreg_gui.gui.registration.model import pca_basis
+
+    raw = np.empty((20, 30, 3), np.uint8)
+    raw[:] = (120, 120, 120)             # grey background
+    raw[5:15, 5:20] = (60, 140, 40)      # a green leaf
+    raw[5:15, 20:28] = (170, 50, 40)     # a red leaf
+    out = to_rgb8(raw, modality="hyperspectral")
+    assert np.array_equal(out, raw)
+    assert display.shows_as_rgb(3, "hyperspectral") and display.shows_as_rgb(3, None)
+    assert pca_basis(raw, "hyperspectral") is None  # no PCA basis imposed on the registered image
+    reg = raw.astype(np.float32)
+    reg[:3] = np.nan                     # not mapped
+    out = to_rgb8(reg, modality="hyperspectral", percentiles=(0, 100))
+    assert np.all(out[:3] == BACKGROUND_RGB)
+    np.testing.assert_array_equal(out, to_rgb8(reg, modality="rgb", percentiles=(0, 100)))
+    grey, green, red = out[18, 2].astype(int), out[10, 10].astype(int), out[10, 24].astype(int)
+    assert grey[0] == grey[1] == grey[2]  # grey stays grey
+    assert green[1] > green[0] > green[2] and red[0] > red[1] > red[2]
+
+
+def test_many_band_cubes_keep_pca_false_colour():
+    cube, _ = _two_material_cube()
+    assert not display.shows_as_rgb(cube.shape[2], "hyperspectral")
+    np.testing.assert_array_equal(to_rgb8(cube, modality="hyperspectral"), pca_false_colour(cube))
+    four = np.random.default_rng(1).random((6, 7, 4)).astype(np.float32)
+    assert not display.shows_as_rgb(4, "hyperspectral") and display.shows_as_rgb(4, "rgb")
+    np.testing.assert_array_equal(to_rgb8(four, modality="hyperspectral"), pca_false_colour(four))

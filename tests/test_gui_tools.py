@@ -286,6 +286,22 @@ def test_switching_to_absolute_limits_does_not_recompute_the_percentiles(registe
     c.limit_mode.setCurrentIndex(c.limit_mode.findData("percentiles"))
 
 
+def test_cube_as_names_what_a_three_band_cube_is_drawn_as(qtbot):
+    """A 3-band hyperspectral image (a camera's 8-bit render) is drawn as RGB, so the default of
+    "Cube as" says so; a many-band cube's default stays the PCA false colour."""
+    from plantreg_gui.gui.registration.display_controls import DisplayControls
+    from plantreg_gui.gui.registration.model import Layer
+
+    c = DisplayControls()
+    qtbot.addWidget(c)
+    c.set_layers([Layer("hs3", "hyperspectral", np.zeros((4, 5, 3), np.uint8)),
+                  Layer("hs", "hyperspectral", np.zeros((4, 5, 20), np.float32))])
+    c.layer.setCurrentText("hs3")
+    assert c.mode.isEnabled() and c.mode.itemText(0) == "RGB (as recorded)"
+    c.layer.setCurrentText("hs")
+    assert c.mode.itemText(0) == "PCA false colour"
+
+
 def test_band_pickers_in_nm(registered_workspace, qtbot):
     ws = registered_workspace
     s = ws.session

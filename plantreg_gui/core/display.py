@@ -7,9 +7,10 @@ are 256-entry lookup tables.
 
 Single-band images go through a colour map (thermal: diverging blue-white-red as in the paper;
 infrared grey; depth viridis), contrast stretched between two percentiles of the finite pixels.
-NaN (not mapped) pixels are drawn in :data:`BACKGROUND_RGB`. Three-band images are RGB (uint8
-as they are, others stretched with one pair of limits for all channels so hues are kept).
-Cubes with other band counts are shown as PCA false colour or as three chosen bands.
+NaN (not mapped) pixels are drawn in :data:`BACKGROUND_RGB`. Three-band images are RGB whatever
+their modality (uint8 as they are, others stretched with one pair of limits for all channels so
+hues are kept), see :func:`shows_as_rgb`. Cubes with other band counts are shown as PCA false
+colour or as three chosen bands.
 """
 
 from __future__ import annotations
@@ -383,6 +384,18 @@ def _stretch_channels(img: np.ndarray, percentiles: tuple[float, float], mask: n
 
 
 # ---------------------------------------------------------------------- the entry point
+def shows_as_rgb(channels: int, modality: str | None = None) -> bool:
+    """Whether :func:`to_rgb8` draws an image of ``channels`` bands as RGB when no ``bands`` are
+    chosen (otherwise: a colour map for one band, PCA false colour for a cube).
+
+    Three bands are RGB for every modality, a hyperspectral one too: such a "cube" is a camera's
+    own 3-band (8-bit) rendering, and its registered version (float32, NaN outside) has the same
+    three bands; a PCA of three bands only rotates their colours into an untrue picture (a green
+    background). Four bands are RGBA for a colour camera; cubes of many bands stay PCA.
+    """
+    return channels == 3 or (channels == 4 and _modality.is_colour(modality))
+
+
 def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = None,
             limits: tuple[float, float] | None = None, percentiles: tuple[float, float] = (1, 99),
             bands: tuple[int, int, int] | None = None, mask: np.ndarray | None = None,
@@ -392,9 +405,9 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
     * single band: colour map ``cmap`` (default by ``modality``, see :data:`DEFAULT_CMAPS`),
       limits ``limits`` or the ``percentiles`` of the finite pixels; for modality 'depth',
       values <= 0 are "no measurement" and drawn like NaN;
-    * three bands (and ``bands`` not given): RGB; uint8 shown as it is, other dtypes stretched
-      with one pair of limits for all channels (keeps hues);
-    * four bands with modality 'rgb': RGBA, alpha dropped;
+    * three bands (and ``bands`` not given), any modality: RGB; uint8 shown as it is, other
+      dtypes stretched with one pair of limits for all channels (keeps hues);
+    * four bands with modality 'rgb': RGBA, alpha dropped (see :func:`shows_as_rgb`);
     * other band counts: PCA false colour (fitted here, or ``pca`` fitted on another cube of the
       same camera by :func:`fit_pca`), or ``bands=(r, g, b)`` band indices, each stretched.
 
@@ -431,9 +444,9 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
             raise ValueError(f"bands must be three indices into {C} bands, got {bands}")
         sub = a[:, :, b]
         return _stretch_channels(sub, percentiles, mask, None if limits is None else [limits] * 3)
-    if C == 4 and mod.is_colour:
-        a, C = a[:, :, :3], 3
-    if C == 3 and not mod.is_cube:
+    if shows_as_rgb(C, mod.name):
+        if C == 4:
+            a = a[:, :, :3]  # RGBA: alpha dropped
         if a.dtype == np.uint8 and limits is None:
             return np.ascontiguousarray(a)
         lo, hi = limits if limits is not None else auto_limits(a, percentiles, mask)

@@ -13,10 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from PySide6.QtCore import QPointF, QRectF, Qt, Signal
-from PySide6.QtGui import QColor, QFont, QPainter, QPen
+from PySide6.QtGui import QColor, QFont, QFontMetricsF, QPainter, QPen
 from PySide6.QtWidgets import QGraphicsView
 
 from ..registration.image_views import ImageView
+from .labels import leader_end, place_labels
 
 _PICK_PX = 9.0  # screen pixels: how close a press must be to a marker to grab it
 
@@ -124,8 +125,15 @@ class PointView(ImageView):
         def screen(uv) -> QPointF:
             return QPointF(self.mapFromScene(QPointF(uv[0] + 0.5, uv[1] + 0.5)))
 
-        for m in self.markers:
-            p = screen(m.uv)
+        # labels placed inside the view and off each other (near points, e.g. two corners of one
+        # leaf, wrote over each other; labels at the right edge were cut off)
+        fm = QFontMetricsF(f)
+        pts = [screen(m.uv) for m in self.markers]
+        vp = self.viewport().rect()
+        boxes = place_labels([(p.x(), p.y()) for p in pts],
+                             [(fm.horizontalAdvance(m.label) + 2.0, fm.height() + 2.0) for m in self.markers],
+                             (0.0, 0.0, float(vp.width()), float(vp.height())))
+        for m, p in zip(self.markers, pts):
             sel = m.index == self.selected
             col = QColor(0, 255, 255) if sel else QColor(*m.colour)
             if m.predicted is not None:  # residual: from the click to where the rig puts the point
@@ -139,8 +147,14 @@ class PointView(ImageView):
             painter.setPen(QPen(col, 2.0))
             painter.drawEllipse(p, 5.0, 5.0)
             painter.drawPoint(p)
+        for m, p, box in zip(self.markers, pts, boxes):  # labels over all markers
+            col = QColor(0, 255, 255) if m.index == self.selected else QColor(*m.colour)
+            end = leader_end((p.x(), p.y()), box)
+            if end is not None:  # a label moved away from its point: a thin line says whose it is
+                painter.setPen(QPen(col, 1.0))
+                painter.drawLine(p, QPointF(*end))
             # the label with a dark halo so it reads on bright leaves and dark background alike
-            tp = p + QPointF(8, -6)
+            tp = QPointF(box[0] + 1.0, box[1] + 1.0 + fm.ascent())
             painter.setPen(QPen(QColor(0, 0, 0)))
             for dx, dy in ((-1, 0), (1, 0), (0, -1), (0, 1)):
                 painter.drawText(tp + QPointF(dx, dy), m.label)

@@ -13,7 +13,7 @@ from PySide6.QtWidgets import (
 
 import numpy as np
 
-from ...core import modality
+from ...core import display, modality
 from .model import COLORMAPS, DisplaySettings, Layer
 
 
@@ -167,6 +167,9 @@ class DisplayControls(QGroupBox):
         self.lock.setChecked(s.locked)
         self.lock.setEnabled(s.limits is not None)
         self.mode.setEnabled(is_cube)
+        # what "no bands chosen" draws: a 3-band cube is RGB (core.display.shows_as_rgb), not PCA
+        self.mode.setItemText(0, "RGB (as recorded)" if display.shows_as_rgb(L.bands, L.modality)
+                              else "PCA false colour")
         self.mode.setCurrentIndex(1 if s.bands is not None else 0)
         for k, sb in enumerate(self.bands):
             sb.setRange(0, max(L.bands - 1, 0))

@@ -58,6 +58,8 @@ def pca_basis(raw: np.ndarray, modality: str, settings: DisplaySettings | None =
     """The PCA false-colour basis of a raw cube (None for images that are not cubes)."""
     if raw.ndim != 3 or raw.shape[2] <= 3 and not _mod.is_cube(modality) or raw.shape[2] == 4:
         return None
+    if display.shows_as_rgb(raw.shape[2], modality):  # a 3-band cube is drawn as RGB, raw and registered
+        return None
     return display.fit_pca(raw, None, (settings or DisplaySettings()).percentiles)
 
 
