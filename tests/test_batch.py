@@ -333,8 +333,9 @@ def test_register_does_not_import_what_it_does_not_use(demo_dir, tmp_path):
     assert p.returncode == 0, p.stderr[-2000:]
     imported = {line.split("|")[-1].strip() for line in p.stderr.splitlines() if line.startswith("import time:")}
     assert "plantreg_gui.core.register" in imported  # the check sees the run's imports
+    # importlib.metadata: ~50 ms (with the email package) only to look up package versions
     for mod in ("dash", "plotly", "flask", "IPython", "matplotlib", "scipy.interpolate", "open3d.visualization",
-                "PySide6", "pyvista"):
+                "PySide6", "pyvista", "importlib.metadata"):
         assert mod not in imported, mod
     # the ray caster was loaded nevertheless (the registration ran); check the module registry
     probe = ("import sys, runpy; sys.argv = ['plantreg'] + sys.argv[1:]\n"
