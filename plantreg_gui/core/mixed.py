@@ -82,7 +82,6 @@ def silhouette_distance(cam: Camera, top_vertices: np.ndarray, edges: np.ndarray
     """
     import cv2
 
-    from .raycast import NEAR_CAMERA_M
     from .register import _segment_dirs
 
     uv = np.asarray(uv, dtype=np.float32).reshape(-1, 2)
@@ -94,7 +93,7 @@ def silhouette_distance(cam: Camera, top_vertices: np.ndarray, edges: np.ndarray
     seg, usable = _segment_dirs(C, top_vertices[used], occlusion_tol_m)
     vis = np.zeros(len(top_vertices), dtype=bool)
     hidden = np.ones(len(used), dtype=bool)
-    hidden[usable] = object_scene.occluded(C, seg[usable], 1.0, skip_m=NEAR_CAMERA_M)
+    hidden[usable] = object_scene.occluded(C, seg[usable], 1.0)
     vis[used] = ~hidden
     keep = vis[edges[:, 0]] | vis[edges[:, 1]]  # an edge half hidden still shows its visible part
     if not keep.any():

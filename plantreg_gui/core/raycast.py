@@ -32,11 +32,12 @@ RAY_CHUNK = 1 << 20
 #: thread while a worker registers; calls are split so that none holds it for more than ~40 ms.
 GIL_CHUNK = 1 << 15
 
-#: Occlusion segments from a camera centre skip their first centimetre (nothing of a plant lies
-#: that close to a lens). Why: every curtain of the uncertainty mesh lies in a plane through the
-#: depth camera's centre, so a segment starting exactly there starts *in* those planes, and
-#: Embree's watertight test then reports grazing hits within ~1 mm of the origin: with the ToF
-#: clean-up, 0.1-0.7 % of the depth camera's P1 pixels came out P3.2 (all truly visible).
+#: Segments tested against the uncertainty mesh from a camera centre skip their first centimetre
+#: (nothing of a plant lies that close to a lens). Why: every curtain of the uncertainty mesh lies
+#: in a plane through the depth camera's centre, so a segment starting exactly there starts *in*
+#: those planes, and Embree's watertight test then reports grazing hits within ~1 mm of the
+#: origin: with the ToF clean-up, 0.1-0.7 % of the depth camera's P1 pixels came out P3.2 (all
+#: truly visible). The object mesh has no such planes; its tests start at the centre.
 NEAR_CAMERA_M = 0.01
 
 #: Largest acceptable error of the interpolated undistortion, pixels.
@@ -575,16 +576,14 @@ class MeshScene:
             return out
         origins = np.asarray(origins, dtype=np.float32)
         if skip_m > 0:
-            d64 = np.asarray(dirs, dtype=np.float64)
-            norm = np.sqrt(np.einsum("ij,ij->i", d64, d64))
+            dirs = np.asarray(dirs, dtype=np.float32)
+            norm = np.sqrt(np.einsum("ij,ij->i", dirs, dirs))
             with np.errstate(divide="ignore", invalid="ignore"):
-                unit = d64 / norm[:, None]
-                if np.isfinite(tfar):  # the same end point, the start moved out
-                    keep = np.clip(1.0 - skip_m / (norm * tfar), 0.0, None)
-                    d64 = d64 * keep[:, None]
-            origins = (origins.astype(np.float64) + np.nan_to_num(unit) * skip_m).astype(np.float32)
-            dirs = d64.astype(np.float32)
-            if np.isfinite(tfar):
+                step = np.where(norm > 0, np.float32(skip_m) / norm, 0).astype(np.float32)  # t of skip_m
+            origins = origins + dirs * step[:, None]
+            if np.isfinite(tfar):  # the same end point, the start moved out
+                keep = 1 - step / np.float32(tfar)
+                dirs = dirs * keep[:, None]
                 short = keep <= 0
                 if short.any():  # nothing left to test: they meet nothing
                     live = np.flatnonzero(~short)

@@ -357,7 +357,7 @@ def _visible(cam: Camera, data: _RecData, idx: np.ndarray, tol: float, radius: f
         vec = vec * np.where(usable, scale, 0)[:, None].astype(np.float32)
         sel = np.flatnonzero(ok & usable)
         ok &= usable
-        occ = (data.meshes.object_scene.occluded(c, vec[sel], skip_m=NEAR_CAMERA_M)
+        occ = (data.meshes.object_scene.occluded(c, vec[sel])
                | data.meshes.uncertainty_scene.occluded(c, vec[sel], skip_m=NEAR_CAMERA_M))
         ok[sel[occ]] = False
     return ok

@@ -602,8 +602,7 @@ class Registrar:
                 C_s = scam.center_rig
                 seg, usable = _segment_dirs(C_s, Xh[in_idx], p.occlusion_tol_m)
                 occ = np.zeros(len(in_idx), dtype=bool)
-                occ[usable] = meshes.object_scene.occluded(C_s, seg[usable], 1.0, check=progress.check,
-                                                            skip_m=NEAR_CAMERA_M)
+                occ[usable] = meshes.object_scene.occluded(C_s, seg[usable], 1.0, check=progress.check)
                 # P3.2 only matters where neither P2 nor P3.1 already decides the case
                 need = np.flatnonzero(~occ & ~p31[in_idx])
                 seg_u, usable_u = _segment_dirs(C_s, Xh[in_idx[need]], p.uncertainty_tol_m)
