@@ -26,9 +26,9 @@ from ...core import modality
 from ...core.display import blend, checkerboard, default_tile, to_rgb8
 from ...core.errors import PlantregError
 from ...core.landmark_session import LandmarkSession, OverlayImages
+from ..workers import Worker, show_error
 from ..registration.image_views import ColourBar
 from ..registration.model import DEPTH, DisplaySettings, Layer, colour_bar_of, raw_layers
-from ..workers import Worker, show_error
 from .point_view import Marker, PointView
 
 #: keys of the nudge panel: key -> (kind, camera axis, sign). Rotations about the camera's own
