@@ -7,6 +7,7 @@ measured maximum is printed.
 """
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -309,3 +310,44 @@ def test_report_heading_says_whether_the_opened_rig_was_fitted(qtbot, page, demo
         assert p.report_text.toPlainText().startswith("Residuals of the current rig (moved by hand")
     finally:
         p.shutdown()  # the overlay's worker: also when an assertion failed
+
+
+def test_views_show_colour_bars_and_the_value_under_the_cursor(qtbot, page, demo):
+    """The landmark views reuse the workspace's colour bar (limits in the modality's unit) and
+    read-out (Layer.value_text): the thermal view has a °C scale, the depth camera's infrared a
+    unitless one, a colour camera none; moving the mouse over a view reads that image's pixel
+    (before, none of it: clicking leaf corners on a thermal image without a temperature scale)."""
+    from plantreg_gui.core import display
+
+    rig, rec, scene = demo
+    th = np.asarray(rec.images[CAM])
+    bar = page.right_bar
+    assert not bar.isHidden() and bar.cmap == "RdBu_r"
+    lo, hi = display.auto_limits(th, (1, 99))  # what the view is drawn with (to_rgb8's default)
+    assert bar.limits == pytest.approx((lo, hi))
+    assert bar.lo.text() == f"{lo:.1f}" and bar.hi.text() == f"{hi:.1f} °C"
+    ir = np.asarray(rec.images["ir"])
+    assert not page.left_bar.isHidden() and page.left_bar.cmap == "gray"
+    assert page.left_bar.limits == pytest.approx(display.auto_limits(ir, (1, 99)))
+    assert not page.left_bar.hi.text().endswith("°C")  # the infrared has no unit
+
+    # a real mouse move over the thermal view reads the thermal pixel under it, in °C
+    row, col = 240, 320
+    p = page.right.mapFromScene(QPointF(col + 0.5, row + 0.5))
+    qtbot.mouseMove(page.right.viewport(), p)
+    qtbot.waitUntil(lambda: "thermal" in page.readout.text(), timeout=5000)
+    c, r = (int(v) for v in re.search(r"x=(\d+) y=(\d+):", page.readout.text()).groups())
+    assert abs(r - row) <= 1 and abs(c - col) <= 1  # within the zoom's rounding
+    assert page.readout.text().endswith(f"x={c} y={r}: {th[r, c]:.2f} °C")
+    # the overlay is in the depth camera's grid: it reads the infrared
+    page.over.hover_scene(QPointF(100.5, 200.5))
+    assert page.readout.text().startswith("ir (640x576)  x=100 y=200: ") and \
+        page.readout.text().endswith(f": {float(ir[200, 100]):.0f}")
+
+    # a colour camera: no colour bar, three values read out
+    page.camera_combo.setCurrentText("rgb")
+    assert page.right_bar.isHidden() and not page.left_bar.isHidden()
+    page.right.hover_scene(QPointF(10.5, 20.5))
+    px = np.asarray(rec.images["rgb"])[20, 10]
+    assert page.readout.text().endswith("x=10 y=20: (" + ", ".join(f"{int(v)}" for v in px) + ")")
+    qtbot.waitUntil(lambda: not page.is_busy(), timeout=300_000)

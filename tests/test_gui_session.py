@@ -101,6 +101,32 @@ def test_spectrum_on_an_unmapped_pixel_says_so(demo_registered):
     assert not np.isfinite(values).any()  # the plot is told "nothing here", not left stale
 
 
+def test_readout_of_a_3_band_cube_gives_its_three_values():
+    """A 3-band cube (the real Plant3DImageReg hyperspectral renders, 8-bit) is drawn as RGB, so its
+    read-out gives the three values as a colour camera's does (before: "17 @ band 0 (3 bands)");
+    a true many-band cube keeps "value @ band k (N bands)"."""
+    from plantreg_gui.gui.registration.model import Layer
+    from plantreg_gui.gui.registration.session import RegistrationSession
+
+    rng = np.random.default_rng(0)
+    hs3 = rng.integers(0, 256, (6, 8, 3), dtype=np.uint8)
+    hs3[2, 5] = (17, 45, 120)
+    cube = rng.random((6, 8, 50)).astype(np.float32)
+    s = RegistrationSession()
+    s.raw = [Layer("hyperspectral", "hyperspectral", hs3), Layer("hsi", "hyperspectral", cube)]
+    s.layers = list(s.raw)
+    s.hover("hyperspectral", 2, 5)
+    assert s.readout.endswith("x=5 y=2: (17, 45, 120)")
+    s.hover("target", 2, 5)
+    assert "hyperspectral: (17, 45, 120)" in s.readout
+    assert f"hsi: {cube[2, 5, 25]:.4g} @ band 25 (50 bands)" in s.readout
+    # float (registered) 3-band cube: three values, a dash where nothing was mapped
+    reg = hs3.astype(np.float32)
+    reg[0, 0] = np.nan
+    L = Layer("hyperspectral", "hyperspectral", reg)
+    assert L.value_text(2, 5) == "(17, 45, 120)" and L.value_text(0, 0) == "—"
+
+
 # ---------------------------------------------------------------------- the workspace, fresh per test
 
 

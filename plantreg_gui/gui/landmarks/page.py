@@ -22,10 +22,13 @@ from PySide6.QtWidgets import (
     QVBoxLayout, QWidget,
 )
 
+from ...core import modality
 from ...core.display import blend, checkerboard, default_tile, to_rgb8
 from ...core.errors import PlantregError
 from ...core.landmark_session import LandmarkSession, OverlayImages
 from ..workers import Worker, show_error
+from ..registration.image_views import ColourBar
+from ..registration.model import DEPTH, DisplaySettings, Layer, colour_bar_of, raw_layers
 from .point_view import Marker, PointView
 
 #: keys of the nudge panel: key -> (kind, camera axis, sign). Rotations about the camera's own
@@ -130,6 +133,21 @@ class LandmarkPage(QWidget):
             v.drag_finished.connect(lambda i, u, vv, w=where: self._drag(i, w, u, vv, True))
         self.left.hovered.connect(lambda r, c: self.over.set_cursor_pixel(r, c))
         self.over.hovered.connect(lambda r, c: self.left.set_cursor_pixel(r, c))
+        # the registration workspace's colour bars (limits in the modality's unit) and read-out
+        # (Layer.value_text) for the raw images shown: a technician clicking leaf corners on a
+        # thermal image sees the temperature scale and the value under the cursor
+        self.left_bar, self.right_bar = ColourBar(), ColourBar()
+        for bar in (self.left_bar, self.right_bar):  # a hidden bar (colour image) keeps the views level
+            sp = bar.sizePolicy()
+            sp.setRetainSizeWhenHidden(True)
+            bar.setSizePolicy(sp)
+        self.shown_layers: dict[str, Layer] = {}  # "left" / "right" -> the shown image's values
+        self.readout = QLabel("")
+        self.readout.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.readout.setMinimumWidth(10)  # a long read-out is clipped, never widens the window
+        self.left.hovered.connect(lambda r, c: self._hover("left", r, c))
+        self.right.hovered.connect(lambda r, c: self._hover("right", r, c))
+        self.over.hovered.connect(lambda r, c: self._hover("left", r, c))  # the overlay is in the left grid
         self.left_title, self.right_title = QLabel(), QLabel()
         self.over_title = QLabel("Registered by the current rig")
         mode = QHBoxLayout()
@@ -149,13 +167,16 @@ class LandmarkPage(QWidget):
         self._flick_timer.timeout.connect(self._flicker_tick)
 
         views = QSplitter(Qt.Orientation.Horizontal)
-        for title, view, extra in ((self.left_title, self.left, None), (self.right_title, self.right, None),
-                                   (None, self.over, mode)):
+        for title, bar, view, extra in ((self.left_title, self.left_bar, self.left, None),
+                                        (self.right_title, self.right_bar, self.right, None),
+                                        (None, None, self.over, mode)):
             box = QWidget()
             bl = QVBoxLayout(box)
             bl.setContentsMargins(2, 2, 2, 2)
             if title is not None:
                 bl.addWidget(title)
+            if bar is not None:
+                bl.addWidget(bar)
             if extra is not None:
                 bl.addLayout(extra)
                 bl.addWidget(self.overlay_label)
@@ -210,6 +231,7 @@ class LandmarkPage(QWidget):
         lay.addLayout(second)
         lay.addWidget(self.hint)
         lay.addWidget(main, 1)
+        lay.addWidget(self.readout)
 
         # nudge keys: an event filter on the views (which would otherwise scroll with the arrows)
         # and the page's keyPressEvent, so they work wherever the focus is on this page
@@ -300,6 +322,7 @@ class LandmarkPage(QWidget):
             return
         self.left_title.setText(f"<b>{dname}</b> (depth camera) — click a point here first")
         self.right_title.setText(f"<b>{s.camera}</b> — then the same point here")
+        self._show_scales()
         self._home_on_points()
 
     def _home_on_points(self) -> None:
@@ -320,6 +343,32 @@ class LandmarkPage(QWidget):
             m = np.maximum(0.25 * (hi - lo), 0.08 * max(h, w))
             lo, hi = np.maximum(lo - m, 0), np.minimum(hi + m, [w, h])
             view.set_home(QRectF(lo[0], lo[1], hi[0] - lo[0], hi[1] - lo[1]))
+
+    def _show_scales(self) -> None:
+        """The colour bars and read-out of the shown images, from their values (the workspace's
+        raw layers: modality, unit, wavelengths; the depth map in mm when there is no image)."""
+        s = self.session
+        d = s.rig.depth()
+        layers = {L.name: L for L in raw_layers(s.rig, s.recording())}
+        left = layers.get(d.name) or layers.get(DEPTH)
+        self.shown_layers = {k: L for k, L in (("left", left), ("right", layers.get(s.camera))) if L is not None}
+        # the left image is drawn with the depth camera's colour map, the depth map too (_show_images)
+        left_st = DisplaySettings(cmap=modality.default_cmap(d.modality))
+        for k, bar, st in (("left", self.left_bar, left_st), ("right", self.right_bar, None)):
+            L = self.shown_layers.get(k)
+            bar.set_bar(*(colour_bar_of(L, st) if L is not None else (None, None, "")))
+        self.readout.setText("Move the cursor over an image to read its values.")
+
+    def _hover(self, side: str, row: int, col: int) -> None:
+        """The value under the cursor in the image's unit (the last pixel stays when the cursor leaves)."""
+        L = self.shown_layers.get(side)
+        if row < 0 or L is None:
+            return
+        h, w = L.data.shape[:2]
+        band = L.bands // 2 if L.bands > 3 else None  # a cube: its middle band, as the workspace
+        text = f"{L.name} ({w}x{h})  x={col} y={row}: {L.value_text(row, col, band)}"
+        self.readout.setText(text)
+        self.readout.setToolTip(text)
 
     # ------------------------------------------------------------------ repaint on events
     def _markers(self) -> tuple[list[Marker], list[Marker]]:

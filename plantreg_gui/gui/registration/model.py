@@ -112,7 +112,7 @@ class Layer:
         px = self.data[row, col]
         if self.data.ndim == 2:
             return format_value(float(px), self.modality)
-        if self.bands == 3 and not _mod.is_cube(self.modality):
+        if display.shows_as_rgb(self.bands, self.modality):  # drawn as RGB (a 3-band cube too): its values
             if not np.all(np.isfinite(px.astype(np.float64))):
                 return "—"
             return "(" + ", ".join(format_value(float(v), self.modality) for v in px) + ")"
@@ -129,6 +129,18 @@ class Layer:
         if not (0 <= row < h and 0 <= col < w):
             return None
         return np.asarray(self.data[row, col], dtype=np.float64)
+
+
+def colour_bar_of(L: Layer, settings: DisplaySettings | None = None
+                  ) -> tuple[str | None, tuple[float, float] | None, str]:
+    """(colour map, (lo, hi) limits in the layer's unit, unit) of a single-band layer as :func:`render`
+    draws it with ``settings`` (default: the modality's colour map, 1-99 percentiles); (None, None, '')
+    for colour and multi-band images (no colour bar). What every view's ColourBar shows."""
+    if L.bands != 1:
+        return None, None, ""
+    st = settings or DisplaySettings()
+    lim = st.limits if st.limits is not None else L.percentile_limits(st.percentiles)
+    return st.cmap or _mod.default_cmap(L.modality), lim, L.unit
 
 
 def wavelengths_of(camera: Any, bands: int) -> np.ndarray | None:

@@ -34,7 +34,8 @@ from ...core.errors import InputError
 from ...core.recording import Recording
 from ...core.rig import Rig
 from .model import (
-    DEPTH, Cloud, DisplaySettings, Layer, build_cloud, pca_basis, raw_layers, registered_layers, render,
+    DEPTH, Cloud, DisplaySettings, Layer, build_cloud, colour_bar_of, pca_basis, raw_layers, registered_layers,
+    render,
 )
 
 
@@ -596,11 +597,7 @@ class RegistrationSession:
     def colour_bar(self, L: Layer) -> tuple[str | None, tuple[float, float] | None, str]:
         """(colour map, (lo, hi) limits in the layer's unit, unit) of a single-band layer as drawn;
         (None, None, '') for colour and multi-band images (no colour bar)."""
-        if L.bands != 1:
-            return None, None, ""
-        st = self.settings_for(L.name)
-        lim = st.limits if st.limits is not None else L.percentile_limits(st.percentiles)
-        return st.cmap or modality.default_cmap(L.modality), lim, L.unit
+        return colour_bar_of(L, self.settings_for(L.name))
 
     def layer_title(self, L: Layer, raw: bool = False) -> str:
         h, w = L.data.shape[:2]
