@@ -29,7 +29,7 @@ import numpy as np
 
 from .errors import InputError
 from .landmarks import Landmark, LandmarkSet
-from .progress import Reporter
+from .progress import Reporter, ensure_reporter
 from .recording import Recording
 from .rig import Rig
 from .rigfit import FitResult, RecordingLandmarks, evaluate_landmarks, fit_rig
@@ -126,6 +126,28 @@ class LandmarkSession:
             lms = LandmarkSet(base=Path(landmarks_path).parent if landmarks_path else Path.cwd(),
                               path=Path(landmarks_path) if landmarks_path else None)
         return cls(rig, lms)
+
+    @classmethod
+    def load(cls, rig_path: str | Path, landmarks_path: str | Path | None = None,
+             recordings: list[str | Path] | None = None, progress: Reporter | None = None) -> "LandmarkSession":
+        """:meth:`open` plus ``recordings`` (folders to add), with every recording of the session
+        read now (images and depth map): a routine for a worker, so that the page's first paint,
+        residuals, fit and refinement read nothing from disk. Cancellable between recordings.
+        Raises :class:`InputError` naming a bad file, or when there is no recording at all."""
+        progress = ensure_reporter(progress)
+        progress(0.0, "reading the rig and the landmarks")
+        s = cls.open(rig_path, landmarks_path)
+        for r in recordings or []:
+            progress.check()
+            s.add_recording(r)
+        if s.recording_key is None:
+            raise InputError("no recording: the landmarks file names none; give --recording DIR", landmarks_path)
+        keys = [s.recording_key] + [k for k in s.recording_keys if k != s.recording_key]  # the shown one first
+        for i, k in enumerate(keys):
+            progress(0.05 + 0.95 * i / len(keys), f"reading recording {i + 1}/{len(keys)}: {Path(k).name}")
+            s.depth_m(k)  # reads the recording too (a bad one is reported here, not on first paint)
+        progress(1.0, "recordings read")
+        return s
 
     def add_recording(self, folder: str | Path) -> str:
         """Add a recording folder (key relative to the landmarks file where possible); returns its key."""
