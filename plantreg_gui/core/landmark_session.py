@@ -468,9 +468,15 @@ class LandmarkSession:
         self.events.report.emit()  # a fit's report no longer describes this rig
 
     # ------------------------------------------------------------------ refine
-    def refine_job(self, cameras: list[str] | None = None, **kw: Any) -> Callable[..., Any]:
+    def refine_job(self, cameras: list[str] | None = None, *, in_process: bool = False,
+                   **kw: Any) -> Callable[..., Any]:
         """A routine ``(progress=Reporter) -> RefineResult`` (core/refine.py) on copies, over
-        every recording of the session, checked against the landmarks."""
+        every recording of the session, checked against the landmarks.
+
+        ``in_process``: run the refinement in a child process (:func:`~.procs.call_in_process`;
+        the routine must be picklable). For the desktop app: on threads, the refinement's camera
+        threads hold the GIL for stretches (GUI-thread gaps while it runs) and notice a cancel only
+        at their next cancellation point (up to 2.8 s on the real plants); a child is stopped at once."""
         fn = self.refine_fn
         if fn is None:
             try:
@@ -484,6 +490,11 @@ class LandmarkSession:
         free = frozenset(it for it in self.free if it.endswith("focal"))
 
         def job(progress: Reporter | None = None) -> Any:
+            if in_process:
+                from .procs import call_in_process
+
+                return call_in_process(fn, rig, recs, cameras=cameras, free=free, landmarks=lms,
+                                       progress=progress, **kw)
             return fn(rig, recs, cameras=cameras, free=free, landmarks=lms, progress=progress, **kw)
 
         return job

@@ -564,7 +564,7 @@ class LandmarkPage(QWidget):
             return
         self.session.free = self.free_items()
         try:
-            job = self.session.refine_job()
+            job = self.session.refine_job(in_process=True)  # stopped at once by Cancel, no GIL held here
         except PlantregError as e:
             show_error(self, "Refine", str(e))
             return

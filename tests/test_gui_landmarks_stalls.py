@@ -1,7 +1,10 @@
-"""Opening files on the landmark page: the recordings are read (and their images made ready for
-showing) on a worker, not on the GUI thread (it blocked the GUI thread ~0.32 s on the real
-plants); the page says it is reading, a bad file is a "Cannot open" dialog, and closing the page
-or opening again while it reads is safe.
+"""The landmark page's long work off the GUI thread.
+
+Opening files: the recordings are read (and their images made ready for showing) on a worker,
+not on the GUI thread (it blocked the GUI thread ~0.32 s on the real plants); the page says it is
+reading, a bad file is a "Cannot open" dialog, and closing the page or opening again while it
+reads is safe. Refine: runs in a child process (its camera threads no longer compete with the
+GUI thread for the GIL), and Cancel stops it at once.
 
 The thread checks are exact (who called the reader); the stall probe's figure is printed, with
 the generous bound of tests/test_gui_landmarks.py for a shared machine.
@@ -127,3 +130,56 @@ def test_closing_or_opening_again_while_reading_is_safe(qtbot, page, demo_dir, t
     qtbot.wait(200)
     assert page.session.landmarks.path == tmp_path / "b.json"
     assert len(workers.SHOWN_ERRORS) == n
+
+
+def _refine_threads() -> list[str]:
+    return [t.name for t in threading.enumerate() if t.name.startswith("refine")]
+
+
+def test_refine_runs_in_a_child_process_and_cancel_stops_it(qtbot, page, demo_dir, tmp_path):
+    import multiprocessing
+
+    page.open(demo_dir / "rig.json", tmp_path / "landmarks.json", [demo_dir / "recording"])
+    qtbot.waitUntil(lambda: page.session is not None and not page.is_busy(), timeout=120_000)
+    s = page.session
+    rig0 = s.rig.to_dict()
+    page.run_refine()
+    assert page.is_busy(include_overlay=False) and page.cancel_button.isEnabled()
+    # under way: the cameras are being refined (progress past the preparation, 10 %)
+    qtbot.waitUntil(lambda: page.progress.value() >= 150, timeout=120_000)
+    threads, children = _refine_threads(), multiprocessing.active_children()
+    assert not threads, f"the refinement runs on threads of the GUI's process: {threads}"
+    assert children
+    t0 = time.perf_counter()
+    with qtbot.waitSignal(page._refine_worker.cancelled, timeout=60_000):
+        page.cancel_button.click()
+    print(f"refine cancelled after {time.perf_counter() - t0:.2f} s")
+    qtbot.waitUntil(lambda: not page.is_busy(), timeout=60_000)
+    assert not any(c.is_alive() for c in children)
+    assert s.rig.to_dict() == rig0 and "Refine cancelled" in page.hint.text()
+
+
+def test_refine_in_a_child_process_returns_its_result(qtbot, page, demo_dir, tmp_path):
+    from plantreg_gui.core.refine import RefineParams
+    from plantreg_gui.gui.workers import Worker
+
+    page.open(demo_dir / "rig.json", tmp_path / "landmarks.json", [demo_dir / "recording"])
+    qtbot.waitUntil(lambda: page.session is not None and not page.is_busy(), timeout=120_000)
+    s = page.session
+    rig0 = s.rig.to_dict()
+    job = s.refine_job(["thermal"], in_process=True,
+                       params=RefineParams(levels_deg=(0.4, 0.0), max_points=1000, min_points=500))
+    seen, results, errors = [], [], []
+    w = Worker(job)
+    w.progress.connect(lambda f, m: seen.append(f))
+    w.finished.connect(results.append)
+    w.failed.connect(lambda msg, det: errors.append(msg))
+    w.start()
+    qtbot.waitUntil(lambda: not w.is_running(), timeout=300_000)
+    assert not errors and results
+    result = results[0]
+    assert seen and "thermal" in result.report["cameras"]
+    page._refine_finished(result)
+    assert "refine thermal" in page.report_text.toPlainText()
+    s.undo()
+    assert s.rig.to_dict() == rig0
