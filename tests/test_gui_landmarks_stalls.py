@@ -183,3 +183,24 @@ def test_refine_in_a_child_process_returns_its_result(qtbot, page, demo_dir, tmp
     assert "refine thermal" in page.report_text.toPlainText()
     s.undo()
     assert s.rig.to_dict() == rig0
+
+
+def test_session_load_reads_every_recording_and_is_cancellable(demo_dir, tmp_path):
+    """The worker's routine (Qt-free): every recording and its depth map read on return (nothing
+    left for the GUI thread to read later), a cancel honoured between the reads."""
+    from plantreg_gui.core.errors import Cancelled, InputError
+    from plantreg_gui.core.landmark_session import LandmarkSession
+    from plantreg_gui.core.progress import CancelToken, Reporter
+
+    msgs = []
+    s = LandmarkSession.load(demo_dir / "rig.json", tmp_path / "lm.json", [demo_dir / "recording"],
+                             progress=Reporter(lambda f, m: msgs.append((f, m))))
+    assert s.recording_keys and set(s._recordings) == set(s.recording_keys) == set(s._depth_m)
+    assert msgs[-1][0] == 1.0 and any("reading recording" in m for _, m in msgs)
+    token = CancelToken()
+    token.cancel()
+    with pytest.raises(Cancelled):
+        LandmarkSession.load(demo_dir / "rig.json", tmp_path / "lm.json", [demo_dir / "recording"],
+                             progress=Reporter(None, token))
+    with pytest.raises(InputError, match="no recording"):
+        LandmarkSession.load(demo_dir / "rig.json", tmp_path / "lm.json")
