@@ -165,6 +165,78 @@ def _ws_3d_shown(ctx: Context) -> bool:
     return cv.plotter is not None and not cv.building  # the staged build is complete
 
 
+# ---------------------------------------------------------------------- landmark page scenarios
+REAL = Path(__file__).resolve().parents[1] / "resources" / "plant3dimagereg"
+
+
+def _lm_files(ctx: Context) -> tuple[Path, Path | None, list[Path]]:
+    """(rig, landmarks, recordings): the real plants' landmarks if their data are here, else the demo."""
+    if os.environ.get("PLANTREG_BENCH_LANDMARKS") != "demo" and (REAL / "landmarks.json").is_file() \
+            and Path("/work/shared/data/plant3dimagereg").is_dir():
+        return REAL / "rig.json", REAL / "landmarks.json", []
+    return ctx.demo_folder() / "rig.json", None, [ctx.demo_folder() / "recording"]
+
+
+def _lm_page(ctx: Context, fresh: bool = False):
+    import plantreg_gui.gui.calibration.wizard  # noqa: F401  (imported by the main window before the
+    import plantreg_gui.gui.registration.workspace  # noqa: F401  page is opened: not the page's cost)
+    from plantreg_gui.gui.landmarks.page import LandmarkPage
+
+    old = ctx.widgets.get("landmarks")
+    if old is not None and not fresh:
+        return old
+    if old is not None:
+        old.shutdown()
+        old.close()
+        old.deleteLater()
+    p = LandmarkPage()
+    p.resize(1400, 900)
+    p.show()
+    ctx.widgets["landmarks"] = p
+    return p
+
+
+def _lm_open_setup(ctx: Context) -> None:
+    _lm_files(ctx)  # the demo written, if used
+    _lm_page(ctx, fresh=True)
+
+
+def _lm_open_run(ctx: Context) -> None:
+    rig, lms, recs = _lm_files(ctx)
+    ctx.widgets["landmarks"].open(rig, lms, recs)
+
+
+def _lm_opened(ctx: Context) -> bool:
+    p = ctx.widgets["landmarks"]
+    return p.session is not None and not p.is_busy()
+
+
+def _lm_open(ctx: Context) -> None:
+    _lm_page(ctx, fresh=True)
+    _lm_open_run(ctx)
+    ctx.wait(lambda: _lm_opened(ctx))
+
+
+def _lm_refine_run(ctx: Context) -> None:
+    """Refine, and Cancel once the refinement is under way (its levels, past the preparation)."""
+    p = ctx.widgets["landmarks"]
+    p.run_refine()
+    ctx.wait(lambda: p.progress.value() >= 150 or not p.is_busy(include_overlay=False))
+    p.cancel_button.click()
+
+
+def _lm_refine_started(ctx: Context) -> None:
+    """Setup of "Cancel" alone: refinement running (not measured)."""
+    _lm_open(ctx)
+    p = ctx.widgets["landmarks"]
+    p.run_refine()
+    ctx.wait(lambda: p.progress.value() >= 150 or not p.is_busy(include_overlay=False))
+
+
+def _lm_idle(ctx: Context) -> bool:
+    return not ctx.widgets["landmarks"].is_busy()
+
+
 SCENARIOS: list[Scenario] = [
     Scenario("workspace: open rig + recording", _ws_open_setup, _ws_open_run, _ws_idle),
     Scenario("workspace: register (meshes built)", _ws_open, lambda ctx: _ws_register_run(ctx, "ir"), _ws_idle),
@@ -175,6 +247,10 @@ SCENARIOS: list[Scenario] = [
     Scenario("workspace: first show of the 3D tab", _ws_fresh_registered,
              lambda ctx: ctx.workspace().set_view("3d"), _ws_3d_shown),
     Scenario("workspace: Load demo (write, open, register)", _ws_load_demo_setup, _ws_load_demo_run, _ws_idle),
+    Scenario("landmarks: open (recordings, overlay)", _lm_open_setup, _lm_open_run, _lm_opened),
+    Scenario("landmarks: Refine then Cancel", _lm_open, _lm_refine_run, _lm_idle),
+    Scenario("landmarks: Cancel of a running Refine", _lm_refine_started,
+             lambda ctx: ctx.widgets["landmarks"].cancel_button.click(), _lm_idle),
 ]
 
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from .errors import InputError
 from .landmarks import Landmark, LandmarkSet
-from .progress import Reporter
+from .progress import Reporter, ensure_reporter
 from .recording import Recording
 from .rig import Rig
 from .rigfit import FitResult, RecordingLandmarks, evaluate_landmarks, fit_rig
@@ -126,6 +126,28 @@ class LandmarkSession:
             lms = LandmarkSet(base=Path(landmarks_path).parent if landmarks_path else Path.cwd(),
                               path=Path(landmarks_path) if landmarks_path else None)
         return cls(rig, lms)
+
+    @classmethod
+    def load(cls, rig_path: str | Path, landmarks_path: str | Path | None = None,
+             recordings: list[str | Path] | None = None, progress: Reporter | None = None) -> "LandmarkSession":
+        """:meth:`open` plus ``recordings`` (folders to add), with every recording of the session
+        read now (images and depth map): a routine for a worker, so that the page's first paint,
+        residuals, fit and refinement read nothing from disk. Cancellable between recordings.
+        Raises :class:`InputError` naming a bad file, or when there is no recording at all."""
+        progress = ensure_reporter(progress)
+        progress(0.0, "reading the rig and the landmarks")
+        s = cls.open(rig_path, landmarks_path)
+        for r in recordings or []:
+            progress.check()
+            s.add_recording(r)
+        if s.recording_key is None:
+            raise InputError("no recording: the landmarks file names none; give --recording DIR", landmarks_path)
+        keys = [s.recording_key] + [k for k in s.recording_keys if k != s.recording_key]  # the shown one first
+        for i, k in enumerate(keys):
+            progress(0.05 + 0.95 * i / len(keys), f"reading recording {i + 1}/{len(keys)}: {Path(k).name}")
+            s.depth_m(k)  # reads the recording too (a bad one is reported here, not on first paint)
+        progress(1.0, "recordings read")
+        return s
 
     def add_recording(self, folder: str | Path) -> str:
         """Add a recording folder (key relative to the landmarks file where possible); returns its key."""
@@ -446,9 +468,15 @@ class LandmarkSession:
         self.events.report.emit()  # a fit's report no longer describes this rig
 
     # ------------------------------------------------------------------ refine
-    def refine_job(self, cameras: list[str] | None = None, **kw: Any) -> Callable[..., Any]:
+    def refine_job(self, cameras: list[str] | None = None, *, in_process: bool = False,
+                   **kw: Any) -> Callable[..., Any]:
         """A routine ``(progress=Reporter) -> RefineResult`` (core/refine.py) on copies, over
-        every recording of the session, checked against the landmarks."""
+        every recording of the session, checked against the landmarks.
+
+        ``in_process``: run the refinement in a child process (:func:`~.procs.call_in_process`;
+        the routine must be picklable). For the desktop app: on threads, the refinement's camera
+        threads hold the GIL for stretches (GUI-thread gaps while it runs) and notice a cancel only
+        at their next cancellation point (up to 2.8 s on the real plants); a child is stopped at once."""
         fn = self.refine_fn
         if fn is None:
             try:
@@ -462,6 +490,11 @@ class LandmarkSession:
         free = frozenset(it for it in self.free if it.endswith("focal"))
 
         def job(progress: Reporter | None = None) -> Any:
+            if in_process:
+                from .procs import call_in_process
+
+                return call_in_process(fn, rig, recs, cameras=cameras, free=free, landmarks=lms,
+                                       progress=progress, **kw)
             return fn(rig, recs, cameras=cameras, free=free, landmarks=lms, progress=progress, **kw)
 
         return job

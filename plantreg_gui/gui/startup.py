@@ -19,14 +19,27 @@ HEAVY_MODULES: tuple[str, ...] = ("pyvista", "pyvistaqt", "vtkmodules.vtkInterac
                                   "vtkmodules.vtkViewsContext2D", "vtkmodules.vtkViewsCore")
 
 
-def preload(modules: tuple[str, ...] = HEAVY_MODULES) -> float:
-    """Import ``modules`` on the calling (GUI) thread; returns the seconds it took. A module that
-    fails to import is left for the view that needs it to report."""
+def preload(modules: tuple[str, ...] = HEAVY_MODULES, open3d: bool = True) -> float:
+    """Import ``modules`` on the calling (GUI) thread, and with ``open3d`` Open3D's compiled core
+    (``core/o3d_core.py``); returns the seconds it took. A module that fails to import is left for
+    the view that needs it to report.
+
+    Why Open3D: its core (the ray caster of every registration, and of the landmark page's
+    overlay) takes ~0.7 s to initialise, mostly in C holding the GIL; first loaded on a worker, it
+    froze the GUI thread during the landmark page's first open (longest gap 0.17-0.36 s; 0.11-0.13 s
+    with it loaded before)."""
     t0 = time.perf_counter()
     for name in modules:
         try:
             importlib.import_module(name)
         except Exception:  # noqa: BLE001 - reported by the view that needs it
+            pass
+    if open3d:
+        try:
+            from ..core.o3d_core import open3d_core
+
+            open3d_core()
+        except Exception:  # noqa: BLE001 - reported by the registration that needs it
             pass
     return time.perf_counter() - t0
 
@@ -52,7 +65,7 @@ def preload_with_splash(app, version: str) -> float:
     p.drawText(26, 78, f"version {version} — multimodal 3D registration")
     p.end()
     splash = QSplashScreen(pix)
-    splash.showMessage("Loading the 3D viewer…", Qt.AlignmentFlag.AlignBottom | Qt.AlignmentFlag.AlignLeft,
+    splash.showMessage("Loading the 3D viewer and the ray caster…", Qt.AlignmentFlag.AlignBottom | Qt.AlignmentFlag.AlignLeft,
                        QColor("#9fb3c8"))
     splash.show()
     app.processEvents()

@@ -26,6 +26,7 @@ from ...core import modality
 from ...core.display import blend, checkerboard, default_tile, to_rgb8
 from ...core.errors import PlantregError
 from ...core.landmark_session import LandmarkSession, OverlayImages
+from ...core.progress import Reporter
 from ..workers import Worker, show_error
 from ..registration.image_views import ColourBar
 from ..registration.model import DEPTH, DisplaySettings, Layer, colour_bar_of, raw_layers
@@ -49,6 +50,31 @@ FREE_PRESETS = {
 }
 
 
+def shown_rgb8(s: LandmarkSession, camera: str, key: str | None = None) -> np.ndarray:
+    """Camera ``camera``'s image of recording ``key`` (default the current one) as the page shows
+    it (RGB8); the depth camera's is :meth:`LandmarkSession.depth_image`."""
+    if camera == s.rig.depth().name:
+        return to_rgb8(np.asarray(s.depth_image(key)), s.rig.depth().modality)
+    return to_rgb8(np.asarray(s.camera_image(camera, key)), s.rig.camera(camera).modality)
+
+
+def read_session(rig: str | Path, landmarks: str | Path | None, recordings: list[str | Path],
+                 progress: Reporter) -> tuple[LandmarkSession, dict[tuple[str, str], np.ndarray]]:
+    """The page's opening, for a worker: the session with every recording read, and the current
+    recording's images as shown, by (recording, camera) (a hyperspectral cube's false colour took
+    0.1-0.17 s on the GUI thread)."""
+    s = LandmarkSession.load(rig, landmarks, recordings, progress=progress.sub(0.0, 0.85))
+    shown = {}
+    names = [s.rig.depth().name] + s.camera_names()
+    for i, c in enumerate(names):
+        progress(0.85 + 0.15 * i / len(names), f"preparing the images: {c}")
+        try:
+            shown[(s.recording_key, c)] = shown_rgb8(s, c)
+        except PlantregError:  # no image of this camera here: said when it is chosen
+            pass
+    return s, shown
+
+
 class LandmarkPage(QWidget):
     """The page. ``open(rig, landmarks, recordings)`` or ``set_session(session)``."""
 
@@ -62,6 +88,8 @@ class LandmarkPage(QWidget):
         self._fit_worker: Worker | None = None
         self._refine_worker: Worker | None = None
         self._overlay_worker: Worker | None = None
+        self._load_worker: Worker | None = None
+        self._shown: dict[tuple[str, str], np.ndarray] = {}  # (recording, camera) -> RGB8 as shown
         self._overlay_dirty = False
         self.overlay: OverlayImages | None = None
         self._flick = False
@@ -254,20 +282,30 @@ class LandmarkPage(QWidget):
 
     # ------------------------------------------------------------------ session
     def open(self, rig: str | Path, landmarks: str | Path | None = None,
-             recordings: list[str | Path] | None = None) -> None:
-        """Open files (raises :class:`InputError` naming a bad file)."""
-        s = LandmarkSession.open(rig, landmarks)
-        for r in recordings or []:
-            s.add_recording(r)
-        if s.recording_key is None:
-            from ...core.errors import InputError
+             recordings: list[str | Path] | None = None) -> Worker:
+        """Open files on a worker (reading the recordings took ~0.3 s on the GUI thread): the page
+        says it is reading, Cancel stops it, a bad file becomes a "Cannot open" dialog naming it,
+        and the session read replaces the shown one. Opening again while reading drops the
+        earlier read (its result, error or cancellation no longer concern the page)."""
+        old = self._load_worker
+        if old is not None:
+            for sig in (old.finished, old.failed, old.cancelled):
+                sig.disconnect()
+            old.cancel()
+        w = Worker(read_session, rig, landmarks, list(recordings or []))
+        self._load_worker = w
+        w.done.connect(lambda: setattr(self, "_load_worker", None) if self._load_worker is w else None)
+        self.hint.setText("Reading the rig, the landmarks and the recordings…")
+        return self._start(w, lambda s: self._load_finished(w, s), "Opening", title="Cannot open")
 
-            raise InputError("no recording: the landmarks file names none; give --recording DIR", landmarks)
-        s.recording()  # load now: a bad recording is reported here, not on first paint
-        self.set_session(s)
+    def _load_finished(self, w: Worker, result: tuple) -> None:
+        if w is self._load_worker:  # not superseded, not shut down meanwhile
+            self.set_session(*result)
 
-    def set_session(self, s: LandmarkSession) -> None:
+    def set_session(self, s: LandmarkSession, shown: dict[tuple[str, str], np.ndarray] | None = None) -> None:
+        """Show session ``s``; ``shown``: images already converted for showing (see :func:`read_session`)."""
         self.session = s
+        self._shown = dict(shown or {})
         s.events.points.connect(self._points_changed)
         s.events.selection.connect(self._selection_changed)
         s.events.rig.connect(self._rig_changed)
@@ -315,8 +353,8 @@ class LandmarkPage(QWidget):
         s = self.session
         dname = s.rig.depth().name
         try:
-            self.left.set_rgb8(to_rgb8(np.asarray(s.depth_image()), s.rig.depth().modality))
-            self.right.set_rgb8(to_rgb8(np.asarray(s.camera_image()), s.rig.camera(s.camera).modality))
+            self.left.set_rgb8(self._image_rgb8(dname))
+            self.right.set_rgb8(self._image_rgb8(s.camera))
         except PlantregError as e:
             show_error(self, "Landmarks", str(e))
             return
@@ -324,6 +362,15 @@ class LandmarkPage(QWidget):
         self.right_title.setText(f"<b>{s.camera}</b> — then the same point here")
         self._show_scales()
         self._home_on_points()
+
+    def _image_rgb8(self, camera: str) -> np.ndarray:
+        """``camera``'s image of the current recording as shown, converted once (going back to a
+        camera is instant); only the current recording's are kept."""
+        key = (self.session.recording_key, camera)
+        if key not in self._shown:
+            self._shown = {k: v for k, v in self._shown.items() if k[0] == key[0]}
+            self._shown[key] = shown_rgb8(self.session, camera)
+        return self._shown[key]
 
     def _home_on_points(self) -> None:
         """Zoom both views to the clicked points (with a margin): where the work is."""
@@ -536,11 +583,11 @@ class LandmarkPage(QWidget):
             items |= {f"{d}:k1", f"{d}:principal"}
         return frozenset(items)
 
-    def _start(self, w: Worker, on_done, label: str) -> Worker:
+    def _start(self, w: Worker, on_done, label: str, title: str | None = None) -> Worker:
         self._workers.add(w)
         w.progress.connect(lambda f, m: (self.progress.setValue(int(1000 * f)), self.hint.setText(m)))
         w.finished.connect(on_done)
-        w.failed.connect(lambda msg, det: show_error(self, label, msg, det))
+        w.failed.connect(lambda msg, det: show_error(self, title or label, msg, det))
         w.cancelled.connect(lambda: self.hint.setText(f"{label} cancelled."))
         w.done.connect(lambda: (self._workers.discard(w), self._sync_enabled(), self.progress.setValue(0)))
         w.start()
@@ -566,7 +613,7 @@ class LandmarkPage(QWidget):
             return
         self.session.free = self.free_items()
         try:
-            job = self.session.refine_job()
+            job = self.session.refine_job(in_process=True)  # stopped at once by Cancel, no GIL held here
         except PlantregError as e:
             show_error(self, "Refine", str(e))
             return
@@ -698,6 +745,7 @@ class LandmarkPage(QWidget):
                    if include_overlay or w is not self._overlay_worker)
 
     def shutdown(self) -> None:
+        self._load_worker = None  # a session read after this is not shown
         self._flick_timer.stop()
         self._overlay_timer.stop()
         for w in list(self._workers):
