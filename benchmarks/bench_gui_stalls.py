@@ -45,26 +45,31 @@ class Context:
             write_demo(self.demo, calibration=False)
         return self.demo
 
-    def workspace(self, fresh: bool = False):
-        """A shown registration workspace (a new one with ``fresh``)."""
-        from PySide6.QtCore import QSettings
-
-        from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
-
-        old = self.widgets.get("workspace")
+    def widget(self, key: str, make: Callable[[], Any], fresh: bool = False):
+        """The shown widget ``key`` (1400 x 900), made by ``make()`` on first use; with ``fresh``
+        the old one is shut down and a new one made."""
+        old = self.widgets.get(key)
         if old is not None and not fresh:
             return old
         if old is not None:
             old.shutdown()
             old.close()
             old.deleteLater()
-        for fmt in (QSettings.Format.NativeFormat, QSettings.Format.IniFormat):  # keep the user's settings out
-            QSettings.setPath(fmt, QSettings.Scope.UserScope, str(self.tmp / "qsettings"))
-        w = RegistrationWorkspace()
+        w = make()
         w.resize(1400, 900)
         w.show()
-        self.widgets["workspace"] = w
+        self.widgets[key] = w
         return w
+
+    def workspace(self, fresh: bool = False):
+        """A shown registration workspace (a new one with ``fresh``)."""
+        from PySide6.QtCore import QSettings
+
+        from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
+
+        for fmt in (QSettings.Format.NativeFormat, QSettings.Format.IniFormat):  # keep the user's settings out
+            QSettings.setPath(fmt, QSettings.Scope.UserScope, str(self.tmp / "qsettings"))
+        return self.widget("workspace", RegistrationWorkspace, fresh)
 
     def wait(self, pred: Callable[[], bool], timeout: float = 600.0) -> None:
         from PySide6.QtCore import QEventLoop, QTimer
@@ -182,18 +187,7 @@ def _lm_page(ctx: Context, fresh: bool = False):
     import plantreg_gui.gui.registration.workspace  # noqa: F401  page is opened: not the page's cost)
     from plantreg_gui.gui.landmarks.page import LandmarkPage
 
-    old = ctx.widgets.get("landmarks")
-    if old is not None and not fresh:
-        return old
-    if old is not None:
-        old.shutdown()
-        old.close()
-        old.deleteLater()
-    p = LandmarkPage()
-    p.resize(1400, 900)
-    p.show()
-    ctx.widgets["landmarks"] = p
-    return p
+    return ctx.widget("landmarks", LandmarkPage, fresh)
 
 
 def _lm_open_setup(ctx: Context) -> None:
