@@ -127,6 +127,21 @@ def test_readout_of_a_3_band_cube_gives_its_three_values():
     assert L.value_text(2, 5) == "(17, 45, 120)" and L.value_text(0, 0) == "—"
 
 
+def test_layer_titles_say_each_thing_once():
+    """A camera named after its modality does not repeat it (the hyperspectral title was cut off
+    at the edge of a side-by-side view); other cameras keep their modality, units and bands."""
+    from plantreg_gui.gui.registration.model import Layer
+    from plantreg_gui.gui.registration.session import RegistrationSession
+
+    s = RegistrationSession()
+    cube = Layer("hyperspectral", "hyperspectral", np.zeros((576, 640, 100), np.float32))
+    assert s.layer_title(cube) == "hyperspectral  (100 bands, 640x576)"
+    ir = Layer("ir", "infrared", np.zeros((576, 640), np.uint16))
+    assert s.layer_title(ir) == "ir  (infrared, 640x576)"
+    lwir = Layer("lwir", "thermal", np.zeros((480, 640), np.float32), unit="°C")
+    assert s.layer_title(lwir) == "lwir  (thermal, °C, 640x480)"
+
+
 # ---------------------------------------------------------------------- the workspace, fresh per test
 
 

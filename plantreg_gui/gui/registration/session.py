@@ -601,10 +601,12 @@ class RegistrationSession:
 
     def layer_title(self, L: Layer, raw: bool = False) -> str:
         h, w = L.data.shape[:2]
-        unit = f", {L.unit}" if L.unit else ""
-        bands = f", {L.bands} bands" if L.bands > 3 else ""
         what = "z of the hit point" if (L.name == DEPTH and not raw) else L.modality
-        return f"{L.name}  ({what}{unit}{bands}, {w}x{h})"
+        # a camera named after its modality does not say it twice ("hyperspectral (hyperspectral,
+        # 100 bands, 640x576)" was cut off at the edge of a side-by-side view)
+        parts = [p for p in (None if what == L.name else what, L.unit or None,
+                             f"{L.bands} bands" if L.bands > 3 else None, f"{w}x{h}") if p]
+        return f"{L.name}  ({', '.join(parts)})"
 
     def export_display_options(self) -> dict[str, dict[str, Any]]:
         """Per camera, the keyword arguments of ``display.to_rgb8`` that reproduce the screen."""
