@@ -32,12 +32,13 @@ RAY_CHUNK = 1 << 20
 #: thread while a worker registers; calls are split so that none holds it for more than ~40 ms.
 GIL_CHUNK = 1 << 15
 
-#: Segments tested against the uncertainty mesh from a camera centre skip their first centimetre
-#: (nothing of a plant lies that close to a lens). Why: every curtain of the uncertainty mesh lies
-#: in a plane through the depth camera's centre, so a segment starting exactly there starts *in*
-#: those planes, and Embree's watertight test then reports grazing hits within ~1 mm of the
-#: origin: with the ToF clean-up, 0.1-0.7 % of the depth camera's P1 pixels came out P3.2 (all
-#: truly visible). The object mesh has no such planes; its tests start at the centre.
+#: Occlusion segments against the uncertainty mesh skip their first centimetre (they all start at
+#: a camera centre, and nothing of a plant lies that close to a lens): its scene is made with
+#: ``MeshScene(..., skip_m=NEAR_CAMERA_M)``. Why: every curtain of the uncertainty mesh lies in a
+#: plane through the depth camera's centre, so a segment starting exactly there starts *in* those
+#: planes, and Embree's watertight test then reports grazing hits within ~1 mm of the origin: with
+#: the ToF clean-up, 0.1-0.7 % of the depth camera's P1 pixels came out P3.2 (all truly visible).
+#: The object mesh has no such planes; its tests start at the centre.
 NEAR_CAMERA_M = 0.01
 
 #: Largest acceptable error of the interpolated undistortion, pixels.
@@ -517,8 +518,10 @@ class MeshScene:
     no ray hits. Open3D's triangles are two-sided, which is what a depth-derived surface needs.
     """
 
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray):
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, skip_m: float = 0.0):
         from .o3d_core import open3d_core
+
+        self.skip_m = float(skip_m)  # the default of :meth:`occluded`'s ``skip_m``
 
         o3d = open3d_core()  # the ray caster without Open3D's visualisation package (start-up)
         self._o3d = o3d
@@ -563,18 +566,19 @@ class MeshScene:
 
     def occluded(self, origins: np.ndarray, dirs: np.ndarray, tfar: float = 1.0,
                  chunk: int = RAY_CHUNK, check: Callable[[], None] | None = None,
-                 skip_m: float = 0.0) -> np.ndarray:
+                 skip_m: float | None = None) -> np.ndarray:
         """(N,) bool: does the segment ``origin + t * dir``, 0 <= t <= ``tfar``, meet the mesh?
 
         Embree's any-hit query (cheaper than a closest hit). Scale ``dirs`` per ray to give
-        each ray its own end point (Open3D takes one scalar ``tfar``). ``skip_m``: the first
-        ``skip_m`` metres of every segment are not tested (segments from a camera centre:
+        each ray its own end point (Open3D takes one scalar ``tfar``). ``skip_m`` (default: the
+        scene's): the first ``skip_m`` metres of every segment are not tested (see
         :data:`NEAR_CAMERA_M`); a segment shorter than that meets nothing."""
         n = len(dirs)
         out = np.zeros(n, dtype=bool)
         if self.n_triangles == 0 or n == 0:
             return out
         origins = np.asarray(origins, dtype=np.float32)
+        skip_m = self.skip_m if skip_m is None else skip_m
         if skip_m > 0:
             dirs = np.asarray(dirs, dtype=np.float32)
             norm = np.sqrt(np.einsum("ij,ij->i", dirs, dirs))
@@ -587,7 +591,7 @@ class MeshScene:
                 short = keep <= 0
                 if short.any():  # nothing left to test: they meet nothing
                     live = np.flatnonzero(~short)
-                    out[live] = self.occluded(origins[live], dirs[live], tfar, chunk, check)
+                    out[live] = self.occluded(origins[live], dirs[live], tfar, chunk, check, skip_m=0.0)
                     return out
         for a in range(0, n, min(chunk, GIL_CHUNK)):
             if check is not None and a % chunk < GIL_CHUNK:

@@ -55,7 +55,7 @@ import numpy as np
 from .camera import Camera
 from .errors import InputError
 from .progress import CancelToken, Reporter, ensure_reporter
-from .raycast import NEAR_CAMERA_M, _has_tilt, distort_normalized, pixel_rays_cam, project_points
+from .raycast import _has_tilt, distort_normalized, pixel_rays_cam, project_points
 from .recording import Recording
 from .register import Meshes, RegistrationParams, build_meshes, filter_depth, transport_pixels
 from .rig import Rig
@@ -357,8 +357,7 @@ def _visible(cam: Camera, data: _RecData, idx: np.ndarray, tol: float, radius: f
         vec = vec * np.where(usable, scale, 0)[:, None].astype(np.float32)
         sel = np.flatnonzero(ok & usable)
         ok &= usable
-        occ = (data.meshes.object_scene.occluded(c, vec[sel])
-               | data.meshes.uncertainty_scene.occluded(c, vec[sel], skip_m=NEAR_CAMERA_M))
+        occ = data.meshes.object_scene.occluded(c, vec[sel]) | data.meshes.uncertainty_scene.occluded(c, vec[sel])
         ok[sel[occ]] = False
     return ok
 

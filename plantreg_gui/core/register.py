@@ -47,8 +47,8 @@ from .cases import AREA_NAMES, CASE_NAMES, Area, Case  # noqa: F401 (re-exported
 from .errors import InputError
 from .mesh import TriMesh, extend_boundary, object_mesh, uncertainty_mesh
 from .progress import Reporter, ensure_reporter
-from .raycast import (NEAR_CAMERA_M, RAY_CHUNK, ConeMarks, MeshScene, RayGrid, cast_where, cone_marks, pixel_rays_cam,
-                      pixel_rays_toward, project_points, ray_grid)
+from .raycast import (NEAR_CAMERA_M, RAY_CHUNK, ConeMarks, MeshScene, RayGrid, cast_where, cone_marks,
+                      pixel_rays_cam, pixel_rays_toward, project_points, ray_grid)
 from .recording import Recording
 from .rig import Rig
 
@@ -349,7 +349,7 @@ def build_meshes(rig: Rig, depth_m: np.ndarray, params: RegistrationParams | Non
         obj_scene = MeshScene(obj.vertices, obj.triangles)
     with _stage(progress, timings, "uncertainty mesh", 0.7, 1.0):
         unc = uncertainty_mesh(obj, dcam.center_rig, float(hi[2]))
-        unc_scene = MeshScene(unc.vertices, unc.triangles)
+        unc_scene = MeshScene(unc.vertices, unc.triangles, skip_m=NEAR_CAMERA_M)  # see NEAR_CAMERA_M
     return Meshes(obj, unc, obj_scene, unc_scene, flying, filled)
 
 
@@ -552,14 +552,13 @@ class Registrar:
                 points[obj_idx] = o_t.astype(np.float32) + dirs[hit] * t_obj[:, None]
                 # uncertainty mesh before the object hit (P3.1) / anywhere (P5 when no object hit)
                 seg = dirs[hit] * np.maximum(t_obj - np.float32(p.uncertainty_tol_m), 0)[:, None]
-                p31 = meshes.uncertainty_scene.occluded(o_t, seg, 1.0, check=progress.check, skip_m=NEAR_CAMERA_M)
+                p31 = meshes.uncertainty_scene.occluded(o_t, seg, 1.0, check=progress.check)
                 miss = np.flatnonzero(~hits.hit)
                 no_idx = pix[miss]  # the pixels without an object hit that P5 can concern
                 may_u = None if cone_u is None else cone_u.rays_may_hit(dirs)
                 p5 = np.zeros(len(no_idx), dtype=bool)
                 test = np.arange(len(no_idx)) if may_u is None else np.flatnonzero(may_u[miss])
-                p5[test] = meshes.uncertainty_scene.occluded(o_t, dirs[miss[test]], np.inf, check=progress.check,
-                                                             skip_m=NEAR_CAMERA_M)
+                p5[test] = meshes.uncertainty_scene.occluded(o_t, dirs[miss[test]], np.inf, check=progress.check)
             area = np.full(N, AREA_P6, dtype=np.uint8)
             area[obj_idx] = np.where(p31, AREA_P5, AREA_P4)
             area[no_idx[p5]] = AREA_P5
@@ -608,8 +607,7 @@ class Registrar:
                 seg_u, usable_u = _segment_dirs(C_s, Xh[in_idx[need]], p.uncertainty_tol_m)
                 unc = np.zeros(len(in_idx), dtype=bool)
                 unc[need[usable_u]] = meshes.uncertainty_scene.occluded(C_s, seg_u[usable_u], 1.0,
-                                                                         check=progress.check,
-                                                                         skip_m=NEAR_CAMERA_M)
+                                                                         check=progress.check)
                 case_h = base[obj_idx].copy()  # 1 or 3 (P3.1)
                 ci = case_h[in_idx]
                 ci[unc] = CASE_P32
