@@ -412,8 +412,7 @@ class LandmarkPage(QWidget):
         if row < 0 or L is None:
             return
         h, w = L.data.shape[:2]
-        band = L.bands // 2 if L.bands > 3 else None  # a cube: its middle band, as the workspace
-        text = f"{L.name} ({w}x{h})  x={col} y={row}: {L.value_text(row, col, band)}"
+        text = f"{L.name} ({w}x{h})  x={col} y={row}: {L.value_text(row, col, L.middle_band)}"
         self.readout.setText(text)
         self.readout.setToolTip(text)
 

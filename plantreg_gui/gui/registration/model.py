@@ -94,6 +94,11 @@ class Layer:
     def bands(self) -> int:
         return 1 if self.data.ndim == 2 else int(self.data.shape[2])
 
+    @property
+    def middle_band(self) -> int | None:
+        """The band a cube is read out at when none is chosen (None: not a cube)."""
+        return self.bands // 2 if self.bands > 3 else None
+
     def percentile_limits(self, percentiles: tuple[float, float]) -> tuple[float, float]:
         """``display.auto_limits`` of the data (all bands pooled), remembered per percentiles: the
         colour bar and the start of absolute limits ask for the same numbers, and a large cube's

@@ -499,7 +499,7 @@ class RegistrationSession:
     # ------------------------------------------------------------------ cursor and read-out
     def band_for(self, L: Layer) -> int | None:
         s = self.settings_for(L.name)
-        return s.bands[0] if s.bands is not None else (L.bands // 2 if L.bands > 3 else None)
+        return s.bands[0] if s.bands is not None else L.middle_band
 
     def hover(self, where: str, row: int, col: int) -> None:
         """The cursor is at (row, col) of ``where``: 'target' (the registered grid) or a raw layer's name.
