@@ -30,7 +30,17 @@ import numpy as np
 
 from .errors import InputError, one_line
 
-IMAGE_SUFFIXES = (".npy", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".hdr")
+#: Still formats OpenCV decodes besides PNG/JPEG/TIFF (thermal and machine-vision cameras write
+#: 16-bit PGM, 8-bit PPM, BMP): suffix -> (format name, accepted file signatures).
+_NETPBM = ("P1", "P2", "P3", "P4", "P5", "P6")
+OPENCV_STILLS = {
+    ".pgm": ("PGM", _NETPBM), ".ppm": ("PPM", _NETPBM), ".pbm": ("PBM", _NETPBM), ".pnm": ("PNM", _NETPBM),
+    ".pxm": ("PNM", _NETPBM), ".pfm": ("PFM", ("Pf", "PF")),
+    ".bmp": ("BMP", ("BM",)), ".dib": ("BMP", ("BM",)),
+    ".webp": ("WebP", ("RIFF",)), ".jp2": ("JPEG 2000", ("\x00\x00\x00\x0cjP",)),
+    ".sr": ("Sun raster", ("\x59\xa6\x6a\x95",)), ".ras": ("Sun raster", ("\x59\xa6\x6a\x95",)),
+}
+IMAGE_SUFFIXES = (".npy", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".hdr", *OPENCV_STILLS)
 
 #: Sanity bounds of an input image (documented in docs/errors.md). A 4K RGB image has 8.3 M
 #: pixels and the paper's hyperspectral cube 512 x 512 x 204 values; the bounds are far above
@@ -211,6 +221,53 @@ def _read_png_jpeg(path: Path, suffix: str) -> Callable[[], np.ndarray]:
     return decode
 
 
+def _read_opencv_still(path: Path, suffix: str) -> Callable[[], np.ndarray]:
+    """PGM/PPM/PBM/PNM/PFM (8- and 16-bit, float), BMP, WebP, JPEG 2000, Sun raster: the signature
+    and the header (Pillow, without decoding) are checked first, then OpenCV decodes the pixels."""
+    from PIL import Image
+
+    kind, signatures = OPENCV_STILLS[suffix]
+    with open(path, "rb") as f:
+        head = f.read(16)
+    if not any(head.startswith(sig.encode("latin-1")) for sig in signatures) or (
+            kind == "WebP" and head[8:12] != b"WEBP"):
+        raise InputError(f"not a {kind} file (its first bytes are not the format's signature)", path)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(path) as im:
+                w, h = im.size
+                bands = len(im.getbands())
+                dtype = {"I": np.uint16, "I;16": np.uint16, "I;16B": np.uint16, "F": np.float32}.get(im.mode, np.uint8)
+    except Image.DecompressionBombError as e:
+        raise InputError(f"{kind} header claims an image beyond plantreg's sanity bound ({one_line(str(e))})",
+                         path) from None
+    except (OSError, SyntaxError, ValueError) as e:
+        raise InputError(f"corrupt or truncated {kind} file ({one_line(str(e))})", path) from None
+    _check_array_header(path, (h, w, bands), dtype, f"the {kind} header")
+    if head[:2] in (b"P4", b"P5", b"P6", b"Pf", b"PF"):  # binary netpbm: the pixel data must all be there
+        per = {b"P4": 0, b"P5": 1, b"P6": 3, b"Pf": 1, b"PF": 3}[head[:2]]
+        item = 4 if head[:2] in (b"Pf", b"PF") else np.dtype(dtype).itemsize
+        nbytes = (w + 7) // 8 * h if per == 0 else w * h * per * item
+        if path.stat().st_size < nbytes + 7:  # the shortest header: "P5 1 1 1\n" minus the digits
+            raise InputError(f"truncated {kind} file: the header claims {w} x {h} pixels ({_human(nbytes)}) but "
+                             f"the file holds {_human(path.stat().st_size)}", path)
+    if head[:2] == b"BM" and int.from_bytes(head[2:6], "little") > path.stat().st_size:
+        raise InputError(f"truncated BMP file: its header says {int.from_bytes(head[2:6], 'little')} bytes but the "
+                         f"file holds {path.stat().st_size}", path)
+
+    def decode() -> np.ndarray:
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise InputError(f"corrupt or truncated {kind} file (OpenCV cannot decode it)", path)
+        if img.ndim == 3 and img.shape[2] == 3:
+            img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+        elif img.ndim == 3 and img.shape[2] == 4:
+            img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGBA)
+        return img
+    return decode
+
+
 def _read_tiff(path: Path) -> Callable[[], np.ndarray]:
     import tifffile
 
@@ -309,7 +366,9 @@ def _map_envi(h: dict, p, inter: str, data: Path) -> np.ndarray | None:
 
 
 def read_image(path: str | Path) -> np.ndarray:
-    """Read ``.npy``, ``.png``, ``.jpg``, ``.tif``/``.tiff`` or an ENVI ``.hdr`` cube.
+    """Read ``.npy``, ``.png``, ``.jpg``, ``.tif``/``.tiff``, an ENVI ``.hdr`` cube, or another
+    still format OpenCV decodes (:data:`OPENCV_STILLS`: PGM/PPM/PBM/PNM/PFM 8- and 16-bit, BMP,
+    WebP, JPEG 2000, Sun raster).
 
     Returns (H, W) or (H, W, C) in the file's dtype (real numbers). Raises :class:`InputError`
     naming the file when it is missing, not a regular readable file, corrupt or truncated, not an
@@ -336,6 +395,8 @@ def image_decoder(path: str | Path) -> Callable[[], np.ndarray]:
             return _read_tiff(path)
         if suffix == ".hdr":
             return _read_envi(path)
+        if suffix in OPENCV_STILLS:
+            return _read_opencv_still(path, suffix)
         raise InputError(f"unsupported image type '{suffix}' (plantreg reads {', '.join(IMAGE_SUFFIXES)})", path)
 
     decode = _image_errors(path, header)
