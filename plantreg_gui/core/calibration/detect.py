@@ -45,6 +45,9 @@ from ..progress import Reporter, ensure_reporter
 from .board import Board
 
 FOUND, FAILED, MISSING = "found", "failed", "missing"
+#: Changes whenever detection can give other results for the same image and options: cached
+#: detections (``detections.json``, :mod:`.cache`) of another version are detected again.
+DETECT_VERSION = 2
 DETECTORS = ("auto", "classic")
 
 
@@ -89,7 +92,13 @@ class Detection:
     """Result of one image. ``corners`` (N, 2) float32 in board order (chessboard: all
     ``columns * rows`` corners; ChArUco: the corners found, ids in ``ids`` (N,) int32), None unless
     ``status == "found"``. ``image_size`` (w, h). ``inverted`` = the polarity used for ordering.
-    ``path`` the image file (None for in-memory images)."""
+    ``path`` the image file (None for in-memory images).
+
+    How the board was found (see :data:`VARIANTS`): ``variant`` the preparation that found it
+    ("plain", "flat", ...; "" when nothing was tried), ``conversion`` how the image became a
+    scalar ("grey", "16-bit", "float", "palette iron", "colour PC1", "luma", "band mean"),
+    ``scale`` the working scale (2 = upscaled twice, 0.46 = downscaled; corners are always in
+    image pixels)."""
 
     pose: str
     camera: str
@@ -101,6 +110,21 @@ class Detection:
     inverted: bool
     path: Path | None = None
     options: DetectOptions = field(default_factory=DetectOptions)
+    variant: str = ""
+    conversion: str = ""
+    scale: float = 1.0
+
+    @property
+    def variant_text(self) -> str:
+        """How the board was found, for people: "background removed, palette iron, upscaled 4x"."""
+        parts = [VARIANT_TEXT.get(self.variant, self.variant)] if self.variant else []
+        if self.conversion and self.conversion not in ("grey", "luma"):
+            parts.append(self.conversion)
+        if self.scale > 1:
+            parts.append(f"upscaled {self.scale:g}x")
+        elif self.scale < 1:
+            parts.append(f"detected at {self.scale:.2g}x, refined at full size")
+        return ", ".join(parts)
 
     @property
     def found(self) -> bool:
@@ -117,27 +141,148 @@ class Detection:
 
 
 # ---------------------------------------------------------------------- image preparation
-def to_gray(image: np.ndarray, enhance: bool = False) -> np.ndarray:
-    """Any image (H, W), (H, W, 3|4) or a cube (H, W, B), of any dtype -> uint8 grey (H, W)."""
+#: Thermal palettes recognised in pseudo-colour images: name -> control points (position 0..1,
+#: R, G, B); the rest come from OpenCV's colour maps. "iron" is FLIR's ironbow (black, blue,
+#: magenta, orange, yellow, white), the default of most thermal cameras.
+_PALETTE_POINTS = {
+    "iron": [(0.0, 0, 0, 10), (0.10, 5, 0, 70), (0.14, 10, 0, 105), (0.20, 50, 0, 140), (0.28, 100, 0, 152),
+             (0.36, 150, 0, 156), (0.42, 190, 8, 140), (0.48, 212, 38, 100), (0.54, 222, 58, 55),
+             (0.60, 232, 80, 15), (0.66, 242, 110, 2), (0.72, 247, 145, 0), (0.80, 251, 185, 0),
+             (0.86, 252, 215, 20), (0.92, 252, 238, 110), (1.0, 255, 252, 235)],
+}
+_CV_PALETTES = ("jet", "rainbow", "inferno", "magma", "plasma", "turbo", "hot", "viridis", "hsv")
+#: a 3-channel image is read as a palette image when the median distance of its colours to the
+#: palette's curve is below this (RGB units of 0..255); JPEG and resampling blur colours a little
+PALETTE_TOL = 14.0
+#: ... and its colours are not close to grey (median channel spread above this)
+GREY_SPREAD = 12.0
+#: :func:`flatten` stretches local contrast up to this many times the image's median local
+#: contrast (the board's checker stands out, the background's noise does not)
+FLAT_NOISE_FLOOR = 3.0
+
+
+def _palettes() -> dict[str, np.ndarray]:
+    """name -> (256, 3) float32 RGB of every known thermal palette (built once)."""
+    if _PALETTE_CACHE:
+        return _PALETTE_CACHE
+    x = np.linspace(0.0, 1.0, 256)
+    for name, pts in _PALETTE_POINTS.items():
+        a = np.asarray(pts, float)
+        _PALETTE_CACHE[name] = np.stack([np.interp(x, a[:, 0], a[:, k]) for k in (1, 2, 3)], 1).astype(np.float32)
+    ramp = np.arange(256, dtype=np.uint8).reshape(-1, 1)
+    for name in _CV_PALETTES:
+        bgr = cv2.applyColorMap(ramp, getattr(cv2, f"COLORMAP_{name.upper()}")).reshape(256, 3)
+        _PALETTE_CACHE[name] = bgr[:, ::-1].astype(np.float32)
+    return _PALETTE_CACHE
+
+
+_PALETTE_CACHE: dict[str, np.ndarray] = {}
+
+
+def _palette_index(colours: np.ndarray, lut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest palette entry of each colour (N, 3) -> (index (N,), distance (N,))."""
+    from scipy.spatial import cKDTree
+
+    d, i = cKDTree(lut).query(colours, k=1)
+    return i, d
+
+
+def to_scalar(image: np.ndarray) -> tuple[np.ndarray, str]:
+    """Any image -> float32 (H, W) scalar field and how it was made.
+
+    (H, W) of any dtype: as it is ("grey" for 8-bit, "16-bit", "float"). Multi-band cubes: band
+    mean. Colour (H, W, 3|4): decided from the data -- colours near grey: luma ("grey");
+    colours on a known thermal palette's curve (median distance below :data:`PALETTE_TOL`): each
+    pixel's palette index ("palette iron"), i.e. the temperature order, not the luma of a rainbow
+    (which folds: yellow and blue of a jet palette have similar luma); other strongly coloured
+    images whose colours lie along one line: their first principal component oriented with
+    luma ("colour PC1"); anything else: luma ("luma").
+    """
     img = np.asarray(image)
-    if img.ndim == 3:
-        if img.shape[2] in (3, 4) and img.dtype == np.uint8:
-            img = cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_RGB2GRAY)
-        elif img.shape[2] in (3, 4):
-            img = img[:, :, :3].astype(np.float64) @ np.array([0.299, 0.587, 0.114])
-        else:  # hyperspectral: the band mean has the best SNR for a grey board
-            img = np.nanmean(img.astype(np.float32), axis=2)
+    if img.ndim == 2:
+        kind = "grey" if img.dtype == np.uint8 else "16-bit" if img.dtype.kind in "ui" else "float"
+        return img.astype(np.float32), kind
+    if img.shape[2] not in (3, 4):  # hyperspectral: the band mean has the best SNR for a grey board
+        return np.nanmean(img.astype(np.float32), axis=2), "band mean"
+    rgb = img[:, :, :3].astype(np.float32)
     if img.dtype != np.uint8:
-        f = img.astype(np.float32)
-        finite = np.isfinite(f)
-        if not finite.any():
-            return np.zeros(f.shape, np.uint8)
-        lo, hi = np.percentile(f[finite], [0.5, 99.5])
-        f = np.where(finite, f, lo)
-        img = np.clip((f - lo) * (255.0 / max(float(hi - lo), 1e-12)), 0, 255).astype(np.uint8)
+        top = 65535.0 if img.dtype == np.uint16 else max(float(np.nanmax(rgb)), 1e-12)
+        rgb = rgb * (255.0 / top)
+    luma = rgb @ np.array([0.299, 0.587, 0.114], np.float32)
+    flat = rgb.reshape(-1, 3)
+    rng = np.random.default_rng(0)
+    sample = flat[rng.integers(0, len(flat), min(len(flat), 4000))]
+    sample = sample[np.all(np.isfinite(sample), axis=1)]
+    if len(sample) == 0 or np.median(sample.max(1) - sample.min(1)) < GREY_SPREAD:
+        return luma, "grey"
+    best, best_d = None, np.inf
+    for name, lut in _palettes().items():
+        d = float(np.median(_palette_index(sample, lut)[1]))
+        if d < best_d:
+            best, best_d = name, d
+    if best_d < PALETTE_TOL:
+        # map the image's distinct colours (a palette image has few) instead of every pixel
+        packed = np.round(np.clip(flat, 0, 255)).astype(np.int32) @ np.array([65536, 256, 1], np.int32)
+        uniq, inv = np.unique(packed, return_inverse=True)
+        cols = np.stack([uniq >> 16, (uniq >> 8) & 255, uniq & 255], 1).astype(np.float32)
+        idx = _palette_index(cols, _palettes()[best])[0].astype(np.float32)
+        return idx[inv.ravel()].reshape(img.shape[:2]), f"palette {best}"
+    centred = sample - sample.mean(0)
+    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    if sv[0] ** 2 > 0.9 * float(np.sum(sv**2)):  # colours along one line: its coordinate
+        axis = vt[0] if vt[0] @ np.array([0.299, 0.587, 0.114]) >= 0 else -vt[0]
+        return (rgb @ axis.astype(np.float32)).astype(np.float32), "colour PC1"
+    return luma, "luma"
+
+
+def _stretch(f: np.ndarray, lo_pct: float = 0.5, hi_pct: float = 99.5) -> np.ndarray:
+    """float (H, W) -> uint8, percentiles ``lo_pct``/``hi_pct`` to 0/255 (non-finite -> low end)."""
+    finite = np.isfinite(f)
+    if not finite.any():
+        return np.zeros(f.shape, np.uint8)
+    if f.dtype == np.uint8 and finite.all():
+        return np.ascontiguousarray(f)
+    sub = f[finite] if f.size <= 1 << 20 else f[finite][:: max(1, f.size >> 20)]
+    lo, hi = np.percentile(sub, [lo_pct, hi_pct])
+    g = np.where(finite, f, lo).astype(np.float32)
+    return np.clip((g - lo) * (255.0 / max(float(hi - lo), 1e-12)), 0, 255).astype(np.uint8)
+
+
+def flatten(f: np.ndarray, sigma: float) -> np.ndarray:
+    """Remove the low-frequency background of a scalar image (a lamp's hot spot, vignetting) and
+    normalise local contrast: ``h = f - G(f)``, ``z = h / sqrt(G(h^2))`` with ``G`` a Gaussian of
+    ``sigma`` px (about half a board square: the checker survives, the background does not; the
+    contrast becomes the same over the whole board however faint the checker is; the floor
+    :data:`FLAT_NOISE_FLOOR` keeps flat background noise down). Noise is smoothed first (a
+    Gaussian of up to 1 px). (H, W) float -> uint8 (H, W), z = +-2 -> 0..255."""
+    g = np.asarray(f, np.float32)
+    finite = np.isfinite(g)
+    if not finite.all():
+        g = np.where(finite, g, np.median(g[finite]) if finite.any() else 0.0).astype(np.float32)
+    pre = min(1.0, sigma / 4.0)
+    if pre >= 0.5:
+        g = cv2.GaussianBlur(g, (0, 0), pre)
+    hp = g - cv2.GaussianBlur(g, (0, 0), sigma)
+    sd = np.sqrt(cv2.GaussianBlur(hp * hp, (0, 0), sigma))
+    # flat regions (a wall, the sky) are not stretched to full contrast: their noise would hide
+    # the board; the floor is a multiple of the typical local contrast (mostly background)
+    floor = FLAT_NOISE_FLOOR * float(np.median(sd)) + 1e-6 * (float(np.abs(hp).max()) + 1e-12)
+    z = hp / np.maximum(sd, floor)
+    return np.clip((z + 2.0) * (255.0 / 4.0), 0, 255).astype(np.uint8)
+
+
+def to_gray(image: np.ndarray, enhance: bool = False) -> np.ndarray:
+    """Any image (H, W), (H, W, 3|4) or a cube (H, W, B), of any dtype -> uint8 grey (H, W):
+    :func:`to_scalar` stretched between its 0.5 and 99.5 percentiles; CLAHE with ``enhance``."""
+    img = np.asarray(image)
+    if img.ndim == 3 and img.shape[2] in (3, 4) and img.dtype == np.uint8:
+        f, kind = to_scalar(img)
+        g = (np.clip(np.round(f), 0, 255).astype(np.uint8) if kind in ("grey", "luma") else _stretch(f))
+    else:
+        g = _stretch(to_scalar(img)[0])
     if enhance:
-        img = cv2.createCLAHE(clipLimit=3.0, tileGridSize=(8, 8)).apply(img)
-    return np.ascontiguousarray(img)
+        g = cv2.createCLAHE(clipLimit=3.0, tileGridSize=(8, 8)).apply(g)
+    return np.ascontiguousarray(g)
 
 
 # ---------------------------------------------------------------------- chessboard
@@ -160,24 +305,33 @@ def _square_means(gray: np.ndarray, corners: np.ndarray, board: Board) -> tuple[
     return float(m[black].mean()), float(m[~black].mean())
 
 
-def canonical_order(corners: np.ndarray, gray: np.ndarray, board: Board, inverted: bool) -> np.ndarray:
-    """Reorder chessboard corners (N, 2) to the board order (rule in the module docstring)."""
+def canonical_permutation(corners: np.ndarray, gray: np.ndarray, board: Board, inverted: bool) -> np.ndarray:
+    """Indices (N,) that put chessboard corners (N, 2) in the board order (rule in the module
+    docstring): ``corners[perm]`` is ordered."""
+    idx = np.arange(board.rows * board.columns).reshape(board.rows, board.columns)
     g = np.asarray(corners, np.float32).reshape(board.rows, board.columns, 2)
     ex = g[0, -1] - g[0, 0]
     ey = g[-1, 0] - g[0, 0]
     if ex[0] * ey[1] - ex[1] * ey[0] < 0:  # mirrored: reverse the rows
-        g = g[::-1]
-    c = g.reshape(-1, 2)
+        idx = idx[::-1]
+    perm = idx.ravel()
+    c = np.asarray(corners, np.float32).reshape(-1, 2)[perm]
     if board.is_symmetric:
         # no colour cue: first corner nearest the image's top-left
         if (c[-1, 0] + c[-1, 1]) < (c[0, 0] + c[0, 1]):
-            c = c[::-1]
-        return np.ascontiguousarray(c)
+            perm = perm[::-1]
+        return np.ascontiguousarray(perm)
     mb, mw = _square_means(gray, c, board)
     black_is_dark = mb < mw
     if black_is_dark == bool(inverted):  # the "black" squares have the wrong brightness
-        c = c[::-1]
-    return np.ascontiguousarray(c)
+        perm = perm[::-1]
+    return np.ascontiguousarray(perm)
+
+
+def canonical_order(corners: np.ndarray, gray: np.ndarray, board: Board, inverted: bool) -> np.ndarray:
+    """Reorder chessboard corners (N, 2) to the board order (rule in the module docstring)."""
+    c = np.asarray(corners, np.float32).reshape(-1, 2)
+    return np.ascontiguousarray(c[canonical_permutation(c, gray, board, inverted)])
 
 
 _SB_ACC = cv2.CALIB_CB_ACCURACY
@@ -229,6 +383,120 @@ def refine_corners(gray: np.ndarray, corners: np.ndarray, board: Board) -> np.nd
     return c
 
 
+# ---------------------------------------------------------------------- automatic variants
+#: Detection runs on an image whose longer side is at most this (corners are then refined at
+#: full resolution) and at least :data:`MIN_SIDE` (tiny thermal images are upscaled first).
+WORK_SIDE = 1280
+MIN_SIDE = 480
+#: What :func:`detect_image` tries, in this order, until the whole board is found: the scalar
+#: image stretched ("plain"); with its background removed and its local contrast normalised at
+#: two scales ("flat", "flat-fine"; :func:`flatten`), each also as its negative for the classic
+#: detector; with CLAHE ("clahe"); the exhaustive searches ("thorough"); and, for downscaled
+#: images, the full-resolution image ("full-res").
+VARIANTS = ("plain", "flat", "flat-fine", "clahe", "thorough", "full-res")
+VARIANT_TEXT = {"plain": "plain", "flat": "background removed", "flat-fine": "background removed (fine)",
+                "clahe": "CLAHE", "thorough": "exhaustive search", "full-res": "full resolution",
+                "classic": "OpenCV classic"}
+
+
+def work_scale(size: tuple[int, int]) -> float:
+    """Scale (work px per image px) of the image detection runs on, for an image (w, h)."""
+    side = max(size)
+    if side > WORK_SIDE:
+        return WORK_SIDE / side
+    if side < MIN_SIDE:
+        return float(int(np.ceil(MIN_SIDE / side)))
+    return 1.0
+
+
+def _resize(a: np.ndarray, s: float) -> np.ndarray:
+    if s == 1.0:
+        return a
+    h, w = a.shape[:2]
+    size = (max(1, round(w * s)), max(1, round(h * s)))
+    return cv2.resize(a, size, interpolation=cv2.INTER_AREA if s < 1 else cv2.INTER_CUBIC)
+
+
+def _to_image_px(c: np.ndarray, s: float) -> np.ndarray:
+    """Corners (N, 2) in an image resized by ``s`` -> in the original image (pixel centres)."""
+    return ((c + 0.5) / s - 0.5).astype(np.float32)
+
+
+def _square_px(size: tuple[int, int], board: Board) -> float:
+    """A board square's size in px when the board fills about half the image's shorter side."""
+    return 0.5 * min(size) / (max(board.columns, board.rows) + 1)
+
+
+def _variant_images(f: np.ndarray, board: Board, enhance: bool):
+    """Yield (variant, uint8 image, thorough) in the order tried; ``f`` the (working-scale) scalar."""
+    plain = _stretch(f)
+    sq = _square_px((f.shape[1], f.shape[0]), board)
+    order = ["clahe", "plain", "flat", "flat-fine"] if enhance else ["plain", "flat", "flat-fine", "clahe"]
+    made: dict[str, np.ndarray] = {}
+    for v in order:
+        if v == "plain":
+            made[v] = plain
+        elif v == "flat":
+            made[v] = flatten(f, max(2.0, sq / 2.0))
+        elif v == "flat-fine":
+            made[v] = flatten(f, max(1.5, sq / 4.0))
+        else:
+            made[v] = cv2.createCLAHE(clipLimit=3.0, tileGridSize=(8, 8)).apply(plain)
+        yield v, made[v], False
+    yield "thorough", made["plain"], True
+    yield "thorough", made["flat"], True
+
+
+def _find_any(img: np.ndarray, pattern: tuple[int, int], thorough: bool) -> np.ndarray | None:
+    """SB detector (plain, then normalised; exhaustive when ``thorough``), then the classic
+    detector on the image and its negative (it only finds dark squares on light)."""
+    flags = [_SB_ACC, _SB_ACC | cv2.CALIB_CB_NORMALIZE_IMAGE] if not thorough else [_SB_ACC | cv2.CALIB_CB_EXHAUSTIVE]
+    for fl in flags:
+        ok, c = cv2.findChessboardCornersSB(img, pattern, flags=fl)
+        if ok:
+            return c.reshape(-1, 2)
+    if thorough:
+        for im in (img, 255 - img):
+            ok, c = cv2.findChessboardCorners(im, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH
+                                              | cv2.CALIB_CB_NORMALIZE_IMAGE)
+            if ok:
+                return c.reshape(-1, 2)
+    return None
+
+
+def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted: bool):
+    """The automatic variants on a scalar image ``f`` (H, W). Returns (corners (N, 2) in board
+    order in image px, variant, scale) or (None, tried variants, scale)."""
+    size = (f.shape[1], f.shape[0])
+    s = work_scale(size)
+    fw = _resize(f, s)
+    tried = []
+    for variant, img, thorough in _variant_images(fw, board, enhance):
+        if variant not in tried:
+            tried.append(variant)
+        c = _find_any(img, board.pattern_size, thorough)
+        if c is None:
+            continue
+        perm = canonical_permutation(c, img if variant != "clahe" else _stretch(fw), board, inverted)
+        if s > 1.0:  # upscaled: refine on the upscaled variant image, then back to image px
+            c = _to_image_px(refine_corners(img, c, board), s)
+        elif s < 1.0:  # downscaled: refine on the full-resolution image
+            c = refine_corners(_stretch(f), _to_image_px(c, s), board)
+        else:
+            c = refine_corners(img, c, board)
+        return c[perm], variant, s
+    if s < 1.0:  # a board too small for the downscaled image
+        tried.append("full-res")
+        img = _stretch(f)
+        c = _find_any(img, board.pattern_size, False)
+        if c is None:
+            c = _find_any(flatten(f, max(2.0, _square_px(size, board) / 2.0)), board.pattern_size, False)
+        if c is not None:
+            perm = canonical_permutation(c, img, board, inverted)
+            return refine_corners(img, c, board)[perm], "full-res", 1.0
+    return None, tried, s
+
+
 def _detect_charuco(gray: np.ndarray, board: Board):
     det = cv2.aruco.CharucoDetector(board.charuco())
     best = (None, None)
@@ -239,24 +507,49 @@ def _detect_charuco(gray: np.ndarray, board: Board):
     return best
 
 
+def _detect_charuco_auto(f: np.ndarray, board: Board, enhance: bool):
+    """ChArUco on the plain, background-removed and CLAHE images; the one with most corners
+    (stops when all are found). Returns (corners, ids, variant)."""
+    plain = _stretch(f)
+    n_all = (board.columns) * (board.rows)
+    best = (None, None, "")
+    sq = _square_px((f.shape[1], f.shape[0]), board)
+    makers = [("plain", lambda: plain), ("flat", lambda: flatten(f, max(2.0, sq / 2.0))),
+              ("clahe", lambda: cv2.createCLAHE(clipLimit=3.0, tileGridSize=(8, 8)).apply(plain))]
+    if enhance:
+        makers = makers[2:] + makers[:2]
+    for variant, make in makers:
+        c, ids = _detect_charuco(make(), board)
+        if c is not None and (best[1] is None or len(ids) > len(best[1])):
+            best = (c, ids, variant)
+        if best[1] is not None and len(best[1]) >= n_all:
+            break
+    return best
+
+
 def detect_image(image: np.ndarray, board: Board, options: DetectOptions | None = None,
                  modality: str | None = None) -> Detection:
     """Detect the board in one image. Returns a :class:`Detection` with empty ``pose``/``camera``
     (status ``found`` or ``failed`` with a reason). ``modality`` only matters when
-    ``options.invert`` is None (thermal -> inverted polarity)."""
+    ``options.invert`` is None (thermal -> inverted polarity).
+
+    The image becomes a scalar (:func:`to_scalar`: palette images by palette index), then the
+    variants of :data:`VARIANTS` are tried in order until the whole board is found; which one
+    found it is recorded in ``variant``/``conversion``/``scale``."""
     options = options or DetectOptions()
     inverted = options.invert if options.invert is not None else _modality.inverted_board(modality)
     img = np.asarray(image)
     size = (int(img.shape[1]), int(img.shape[0]))
-    gray = to_gray(img, options.enhance)
+    f, conversion = to_scalar(img)
 
-    def fail(reason: str) -> Detection:
-        return Detection("", "", FAILED, reason, None, None, size, inverted, None, options)
+    def fail(reason: str, variant: str = "") -> Detection:
+        return Detection("", "", FAILED, reason, None, None, size, inverted, None, options, variant, conversion)
 
-    if gray.max() == gray.min():
+    finite = np.isfinite(f)
+    if not finite.any() or float(np.nanmax(f)) == float(np.nanmin(f)):
         return fail("the image is blank (one value everywhere)")
     if board.type == "charuco":
-        corners, ids = _detect_charuco(gray, board)
+        corners, ids, variant = _detect_charuco_auto(f, board, options.enhance)
         if corners is None:
             return fail("no ChArUco corners found (check dictionary and marker size, or the image is too dark/blurred)")
         if len(ids) < 6:
@@ -264,15 +557,24 @@ def detect_image(image: np.ndarray, board: Board, options: DetectOptions | None 
         if cv2.aruco.CharucoBoard.checkCharucoCornersCollinear(board.charuco(), ids.reshape(-1, 1)):
             return fail("the ChArUco corners found are collinear (too little of the board is visible)")
         order = np.argsort(ids)
-        return Detection("", "", FOUND, "", corners[order], ids[order], size, inverted, None, options)
-    corners = _find_chessboard(gray, board.pattern_size, detector=options.detector)
+        return Detection("", "", FOUND, "", corners[order], ids[order], size, inverted, None, options,
+                         variant, conversion)
+    if options.detector == "classic":
+        gray = to_gray(img, options.enhance)
+        corners = _find_classic(gray, board.pattern_size)
+        if corners is None:
+            return fail(f"no {board.columns}x{board.rows} inner-corner chessboard found by the classic detector",
+                        "classic")
+        corners = canonical_order(corners, gray, board, inverted)
+        return Detection("", "", FOUND, "", corners.astype(np.float32), None, size, inverted, None, options,
+                         "classic", conversion)
+    corners, variant, scale = _detect_chessboard_auto(f, board, options.enhance, inverted)
     if corners is None:
-        return fail(f"no {board.columns}x{board.rows} inner-corner chessboard found"
-                    + ("" if options.enhance else " (try contrast enhancement)"))
-    if options.detector != "classic":
-        corners = refine_corners(gray, corners, board)
-    corners = canonical_order(corners, gray, board, inverted)
-    return Detection("", "", FOUND, "", corners.astype(np.float32), None, size, inverted, None, options)
+        return fail(f"no {board.columns}x{board.rows} inner-corner chessboard found (tried: {', '.join(variant)}"
+                    f"{'' if scale == 1 else f'; detected at {scale:g}x'}); check the board size and that "
+                    "the whole board is in the image")
+    return Detection("", "", FOUND, "", corners.astype(np.float32), None, size, inverted, None, options,
+                     variant, conversion, scale)
 
 
 def suggest_board_size(images: list[np.ndarray], board: Board) -> tuple[int, int] | None:

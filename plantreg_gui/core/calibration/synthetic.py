@@ -8,8 +8,9 @@
   each board axis, from the ray Jacobian), so edges and corners sit exactly where the geometry
   puts them; then optical blur and sensor noise per modality;
 * visible cameras: uint8 RGB; the infrared (depth) camera: uint16 with active-illumination
-  fall-off; thermal: float32 degrees C of a *heated* board (printed squares warm -> the image is a
-  photographic negative), blurred and low-contrast; hyperspectral: float32 (H, W, B) reflectance;
+  fall-off; thermal: float32 degrees C of a *lamp-heated* board as real ones look (:func:`_thermal`:
+  a hot spot, printed squares warmer by a few percent of the image range -> a photographic
+  negative, a warm hand holding it, blur); hyperspectral: float32 (H, W, B) reflectance;
 * depth maps of the board for the depth camera: z of the plane in the depth camera's frame,
   plus a per-pose ToF bias and noise, quantised to depth units (``rig.depth_scale``);
 * board poses cover the plants' depth range (0.4 - 1.1 m) with tilts up to ~35 degrees.
@@ -306,13 +307,7 @@ def _shade(kind: str, refl: np.ndarray, cover: np.ndarray, z: np.ndarray, cam: C
         img = img + rng.normal(0.0, 1.0, img.shape) * (2.0 + 0.4 * np.sqrt(np.maximum(img, 0)))
         return np.clip(np.round(img), 0, 65535).astype(np.uint16)
     if kind == "thermal":
-        # heated board: printed (black) squares absorb the heat lamp -> warm; paper cooler
-        temp = 26.0 + 2.2 * (1.0 - refl) + 0.4 * _smooth_field(rng, (H, W), 2.0)
-        bg = 21.5 + 0.8 * _smooth_field(rng, (H, W), 12.0)
-        img = cover * temp + (1.0 - cover) * bg
-        img = cv2.GaussianBlur(img, (0, 0), 1.3)
-        img = img + rng.normal(0.0, 0.07, img.shape)  # NETD ~ 70 mK
-        return img.astype(np.float32)
+        return _thermal(refl, cover, rng)
     # hyperspectral: reflectance cube (H, W, B)
     gains = np.linspace(0.55, 1.0, bands)
     albedo = 0.05 + 0.75 * refl
@@ -322,6 +317,47 @@ def _shade(kind: str, refl: np.ndarray, cover: np.ndarray, z: np.ndarray, cam: C
     cube = base[..., None].astype(np.float32) * gains.astype(np.float32)
     cube += 0.012 * rng.standard_normal((H, W, bands), dtype=np.float32)
     return cube
+
+
+def _thermal(refl: np.ndarray, cover: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A lamp-heated board as a thermal camera sees it, float32 degrees C (H, W): the board
+    warmer where the lamp pointed (a hot spot of +4..9 K, off-centre, half a board wide), the
+    printed squares warmer than the paper by 0.5-0.9 K (toner absorbs and emits more: the
+    checker is a photographic negative with a contrast of a few percent of the image range), a
+    hand holding the board (34 C, the warmest thing in view), a room at ~21.5 C with warm and
+    cold patches, optical blur and noise (NETD ~60 mK)."""
+    H, W = refl.shape
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    on = cover > 0.5
+    if on.any():
+        v, u = np.nonzero(on)
+        cu, cv_ = float(u.mean()), float(v.mean())
+        r = 0.5 * float(np.sqrt(on.sum()))
+        su, sv = cu + rng.uniform(-0.4, 0.4) * r, cv_ + rng.uniform(-0.4, 0.4) * r
+    else:
+        cu = su = W / 2.0
+        cv_ = sv = H / 2.0
+        r = 0.25 * min(H, W)
+    spot = rng.uniform(4.0, 9.0) * np.exp(-((xx - su) ** 2 + (yy - sv) ** 2) / (2.0 * (rng.uniform(0.6, 1.0) * r) ** 2))
+    temp = 23.5 + spot + rng.uniform(0.5, 0.9) * (1.0 - refl) + 0.3 * _smooth_field(rng, (H, W), 2.0)
+    bg = 21.5 + 1.2 * _smooth_field(rng, (H, W), 6.0) + 0.3 * spot  # the lamp warms the wall behind too
+    img = cover * temp + (1.0 - cover) * bg
+    # a hand and forearm holding the board from below or a side, outside the board
+    side = rng.integers(0, 3)
+    hand = np.zeros((H, W), np.float32)
+    w_arm = max(3.0, 0.25 * r)
+    if side == 0:  # from below
+        x0 = cu + rng.uniform(-0.5, 0.5) * r
+        hand[(np.abs(xx - x0) < w_arm) & (yy > cv_ + 1.1 * r)] = 1.0
+    else:
+        y0 = cv_ + rng.uniform(-0.5, 0.5) * r
+        far = (xx < cu - 1.3 * r) if side == 1 else (xx > cu + 1.3 * r)
+        hand[(np.abs(yy - y0) < w_arm) & far] = 1.0
+    hand *= (cover < 0.05)
+    img = np.where(hand > 0, 34.0 + 0.4 * _smooth_field(rng, (H, W), 10.0), img)
+    img = cv2.GaussianBlur(img.astype(np.float32), (0, 0), 1.5)
+    img = img + rng.normal(0.0, 0.06, img.shape)
+    return img.astype(np.float32)
 
 
 def _n_bands(cam: Camera, bands: int | None) -> int:
@@ -338,9 +374,21 @@ def _n_bands(cam: Camera, bands: int | None) -> int:
 _SUFFIX = {"visible": ".png", "infrared": ".png", "thermal": ".tif", "hyperspectral": ".npy"}
 
 
+#: Thermal images written as 16-bit counts (``thermal_suffix`` ".pgm" or ".png"): centikelvin,
+#: as radiometric cameras (FLIR Lepton's TLinear) deliver them.
+COUNTS_PER_K = 100.0
+
+
 def _write(path: Path, img: np.ndarray) -> None:
     s = path.suffix.lower()
-    if s == ".png":
+    if s in (".pgm", ".ppm", ".bmp"):
+        from ..imageio import atomic_path
+
+        out = cv2.cvtColor(img, cv2.COLOR_RGB2BGR) if img.ndim == 3 else img
+        with atomic_path(path) as tmp:
+            if not cv2.imwrite(str(tmp), out):
+                raise OSError(f"cannot write {path}")
+    elif s == ".png":
         write_png(path, img)
     elif s == ".tif":
         write_tiff(path, img)
@@ -353,7 +401,7 @@ def write_calibration_session(rig: Rig, folder: str | Path, seed: int = 0, n_pos
                               progress: Reporter | None = None, board: Board | None = None,
                               overwrite: bool = False, bands: int | None = None,
                               tof_bias_mm: tuple[float, float] = (3.0, 2.0),
-                              tof_noise_mm: float = 1.0) -> Path:
+                              tof_noise_mm: float = 1.0, suffixes: dict[str, str] | None = None) -> Path:
     """Render a synthetic capture session of ``rig`` into ``folder`` (built under a temporary name,
     moved into place when complete) and return ``folder``.
 
@@ -361,9 +409,12 @@ def write_calibration_session(rig: Rig, folder: str | Path, seed: int = 0, n_pos
     camera's ``extra["bands"]`` or 8. Per pose, the ToF bias is drawn from
     N(``tof_bias_mm[0]``, ``tof_bias_mm[1]``) mm; pixel noise N(0, ``tof_noise_mm``) mm.
     Files: ``pose_NN/<camera>.png|.tif|.npy``, ``pose_NN/depth.png`` (uint16 depth units),
-    ``session.json``, ``truth.json``.
+    ``session.json``, ``truth.json``. ``suffixes`` overrides the file type per kind of camera
+    ("visible", "infrared", "thermal", "hyperspectral" -> ".ppm", ".pgm", ...); thermal images
+    in ".pgm"/".png" are 16-bit counts (:data:`COUNTS_PER_K` per kelvin, units "cK").
     """
     progress = ensure_reporter(progress)
+    suffixes = dict(suffixes or {})
     rng = np.random.default_rng(seed)
     board = board or choose_board(rig)
     folder = Path(folder)
@@ -390,7 +441,10 @@ def write_calibration_session(rig: Rig, folder: str | Path, seed: int = 0, n_pos
                 kind = _kind(cam.modality)
                 nb = _n_bands(cam, bands)
                 img = _shade(kind, refl, cover, z, cam, rng, nb)
-                _write(pdir / f"{cam.name}{_SUFFIX[kind]}", img)
+                suffix = suffixes.get(kind, _SUFFIX[kind])
+                if kind == "thermal" and suffix in (".pgm", ".png"):
+                    img = np.clip(np.round((img + 273.15) * COUNTS_PER_K), 0, 65535).astype(np.uint16)
+                _write(pdir / f"{cam.name}{suffix}", img)
                 if cam.name == rig.depth_camera:
                     # ToF depth: z of the board in the depth camera's frame, biased, noisy, quantised
                     d_m = z + (bias + rng.normal(0.0, tof_noise_mm, z.shape)) / 1000.0
@@ -403,6 +457,10 @@ def write_calibration_session(rig: Rig, folder: str | Path, seed: int = 0, n_pos
             session["depth"] = {"camera": rig.depth_camera, "scale": rig.depth_scale}
         session["cameras"] = {c.name: {"modality": c.modality, **{k: c.extra[k] for k in ("units", "bands")
                                                                    if k in c.extra}} for c in rig.cameras}
+        if suffixes.get("thermal") in (".pgm", ".png"):
+            for c in rig.cameras:
+                if _kind(c.modality) == "thermal":
+                    session["cameras"][c.name]["units"] = "cK"
         session["review"] = {}
         atomic_write_text(tmp / SESSION_FILE, json.dumps(session, indent=2) + "\n")
         atomic_write_text(tmp / TRUTH_FILE, json.dumps(truth, indent=2) + "\n")
