@@ -156,6 +156,9 @@ _CV_PALETTES = ("jet", "rainbow", "inferno", "magma", "plasma", "turbo", "hot", 
 PALETTE_TOL = 14.0
 #: ... and its colours are not close to grey (median channel spread above this)
 GREY_SPREAD = 12.0
+#: ... and an unknown palette (colours along one line) only when they are this saturated; a
+#: photograph's colours are less so and it is read by its luma
+PALETTE_SPREAD = 40.0
 #: :func:`flatten` stretches local contrast up to this many times the image's median local
 #: contrast (the board's checker stands out, the background's noise does not)
 FLAT_NOISE_FLOOR = 3.0
@@ -196,7 +199,7 @@ def to_scalar(image: np.ndarray) -> tuple[np.ndarray, str]:
     pixel's palette index ("palette iron"), i.e. the temperature order, not the luma of a rainbow
     (which folds: yellow and blue of a jet palette have similar luma); other strongly coloured
     images whose colours lie along one line: their first principal component oriented with
-    luma ("colour PC1"); anything else: luma ("luma").
+    luma ("colour PC1", only for saturated colours: a photograph is read by its luma); anything else: luma ("luma").
     """
     img = np.asarray(image)
     if img.ndim == 2:
@@ -204,6 +207,11 @@ def to_scalar(image: np.ndarray) -> tuple[np.ndarray, str]:
         return img.astype(np.float32), kind
     if img.shape[2] not in (3, 4):  # hyperspectral: the band mean has the best SNR for a grey board
         return np.nanmean(img.astype(np.float32), axis=2), "band mean"
+    if img.dtype == np.uint8:  # the common case: decide on a sample before converting everything
+        small = np.ascontiguousarray(img[:: max(1, img.shape[0] // 64), :: max(1, img.shape[1] // 64), :3])
+        spread = small.max(2).astype(np.int16) - small.min(2)
+        if np.median(spread) < GREY_SPREAD:
+            return cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_RGB2GRAY).astype(np.float32), "grey"
     rgb = img[:, :, :3].astype(np.float32)
     if img.dtype != np.uint8:
         top = 65535.0 if img.dtype == np.uint16 else max(float(np.nanmax(rgb)), 1e-12)
@@ -229,7 +237,8 @@ def to_scalar(image: np.ndarray) -> tuple[np.ndarray, str]:
         return idx[inv.ravel()].reshape(img.shape[:2]), f"palette {best}"
     centred = sample - sample.mean(0)
     _, sv, vt = np.linalg.svd(centred, full_matrices=False)
-    if sv[0] ** 2 > 0.9 * float(np.sum(sv**2)):  # colours along one line: its coordinate
+    saturated = np.median(sample.max(1) - sample.min(1)) > PALETTE_SPREAD
+    if saturated and sv[0] ** 2 > 0.9 * float(np.sum(sv**2)):  # colours along one line: its coordinate
         axis = vt[0] if vt[0] @ np.array([0.299, 0.587, 0.114]) >= 0 else -vt[0]
         return (rgb @ axis.astype(np.float32)).astype(np.float32), "colour PC1"
     return luma, "luma"
@@ -367,19 +376,21 @@ def _find_chessboard(gray: np.ndarray, pattern: tuple[int, int], thorough: bool 
     return _find_classic(gray, pattern, win=5)
 
 
-def refine_corners(gray: np.ndarray, corners: np.ndarray, board: Board) -> np.ndarray:
+def refine_corners(gray: np.ndarray, corners: np.ndarray, board: Board, guard: bool = True) -> np.ndarray:
     """Polish chessboard corners (N, 2) with ``cv2.cornerSubPix``, its half-window 40 % of the
     smallest corner spacing in the image (so it never reaches a neighbouring corner). On rendered
     boards with known truth this halves the SB detector's error and removes its ~0.02 px bias.
-    A corner that would move by more than a third of the window keeps its position."""
+    With ``guard``, a corner that would move by more than a third of the window keeps its
+    position (without: the classic detector's rough corners, which must move)."""
     g = corners.reshape(board.rows, board.columns, 2)
     spacing = min(float(np.linalg.norm(np.diff(g, axis=0), axis=2).min()),
                   float(np.linalg.norm(np.diff(g, axis=1), axis=2).min()))
     w = int(np.clip(0.4 * spacing, 2, 15))
     c = cv2.cornerSubPix(gray.astype(np.float32), corners.reshape(-1, 1, 2).astype(np.float32).copy(), (w, w), (-1, -1),
                          (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-4)).reshape(-1, 2)
-    moved = np.linalg.norm(c - corners, axis=1) > max(1.0, w / 3.0)
-    c[moved] = corners[moved]
+    if guard:
+        moved = np.linalg.norm(c - corners, axis=1) > max(1.0, w / 3.0)
+        c[moved] = corners[moved]
     return c
 
 
@@ -447,21 +458,34 @@ def _variant_images(f: np.ndarray, board: Board, enhance: bool):
     yield "thorough", made["flat"], True
 
 
-def _find_any(img: np.ndarray, pattern: tuple[int, int], thorough: bool) -> np.ndarray | None:
-    """SB detector (plain, then normalised; exhaustive when ``thorough``), then the classic
-    detector on the image and its negative (it only finds dark squares on light)."""
-    flags = [_SB_ACC, _SB_ACC | cv2.CALIB_CB_NORMALIZE_IMAGE] if not thorough else [_SB_ACC | cv2.CALIB_CB_EXHAUSTIVE]
-    for fl in flags:
-        ok, c = cv2.findChessboardCornersSB(img, pattern, flags=fl)
-        if ok:
-            return c.reshape(-1, 2)
-    if thorough:
+def _find_any(img: np.ndarray, pattern: tuple[int, int], thorough: bool,
+              sb_first: bool = False) -> tuple[np.ndarray | None, str]:
+    """Cheap first: the classic detector on the image and on its negative (it only finds dark
+    squares on light; milliseconds on a clear board), then the SB detector (polarity-free,
+    robust to blur and low contrast; its corners are refined later anyway), plain and normalised;
+    when ``thorough``: the SB detector's exhaustive search. ``sb_first`` (upscaled tiny images,
+    where SB is cheap and its start points refine better): SB before classic. Returns (corners
+    (N, 2) or None, "classic" | "sb")."""
+    def classic():
         for im in (img, 255 - img):
             ok, c = cv2.findChessboardCorners(im, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH
                                               | cv2.CALIB_CB_NORMALIZE_IMAGE)
             if ok:
-                return c.reshape(-1, 2)
-    return None
+                return c.reshape(-1, 2), "classic"
+        return None, ""
+
+    def sb():
+        for fl in [0, cv2.CALIB_CB_NORMALIZE_IMAGE] if not thorough else [_SB_ACC | cv2.CALIB_CB_EXHAUSTIVE]:
+            ok, c = cv2.findChessboardCornersSB(img, pattern, flags=fl)
+            if ok:
+                return c.reshape(-1, 2), "sb"
+        return None, ""
+
+    for step in ((sb,) if thorough else (sb, classic) if sb_first else (classic, sb)):
+        c, how = step()
+        if c is not None:
+            return c, how
+    return None, ""
 
 
 def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted: bool):
@@ -474,25 +498,30 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
     for variant, img, thorough in _variant_images(fw, board, enhance):
         if variant not in tried:
             tried.append(variant)
-        c = _find_any(img, board.pattern_size, thorough)
+        c, how = _find_any(img, board.pattern_size, thorough, sb_first=s > 1.0)
         if c is None:
             continue
         perm = canonical_permutation(c, img if variant != "clahe" else _stretch(fw), board, inverted)
+        if how == "classic":  # its corners are the quads' corners: bring them onto the saddle points first
+            c = refine_corners(img, c, board, guard=False)
         if s > 1.0:  # upscaled: refine on the upscaled variant image, then back to image px
             c = _to_image_px(refine_corners(img, c, board), s)
-        elif s < 1.0:  # downscaled: refine on the full-resolution image
-            c = refine_corners(_stretch(f), _to_image_px(c, s), board)
+        elif s < 1.0:  # downscaled: refine on the full-resolution image (cornerSubPix needs no stretch)
+            c = refine_corners(f, _to_image_px(c, s), board)
         else:
             c = refine_corners(img, c, board)
         return c[perm], variant, s
     if s < 1.0:  # a board too small for the downscaled image
         tried.append("full-res")
         img = _stretch(f)
-        c = _find_any(img, board.pattern_size, False)
+        c, how = _find_any(img, board.pattern_size, False)
         if c is None:
-            c = _find_any(flatten(f, max(2.0, _square_px(size, board) / 2.0)), board.pattern_size, False)
+            img = flatten(f, max(2.0, _square_px(size, board) / 2.0))
+            c, how = _find_any(img, board.pattern_size, False)
         if c is not None:
             perm = canonical_permutation(c, img, board, inverted)
+            if how == "classic":
+                c = refine_corners(img, c, board, guard=False)
             return refine_corners(img, c, board)[perm], "full-res", 1.0
     return None, tried, s
 
@@ -618,22 +647,165 @@ def detect_session(session, options: dict[tuple[str, str], DetectOptions] | None
                    progress: Reporter | None = None,
                    views: list[tuple[str, str]] | None = None) -> Iterator[Detection]:
     """Detect every (pose, camera) of the session; a generator yielding each :class:`Detection`
-    as it is done (poses in order, cameras in session order), so a GUI can fill a table as
-    results arrive. ``options`` per image override the session's stored review options.
-    ``views`` restricts the work to some (pose, camera) pairs. Each step is a cancellation point
-    (``progress`` raises :class:`Cancelled`); stopping the iteration also stops the work.
-    Unreadable images raise :class:`InputError` naming the file.
+    as it is done (:func:`detect_views`: cached ones first, the others as the worker processes
+    finish them), so a GUI can fill a table as results arrive. ``options`` per image override the
+    session's stored review options. ``views`` restricts the work to some (pose, camera) pairs.
+    Each step is a cancellation point (``progress`` raises :class:`Cancelled`); stopping the
+    iteration also stops the work. Unreadable images raise :class:`InputError` naming the file.
     """
+    for det, _ in detect_views(session, views, options, progress):
+        yield det
+
+
+def worker_count(n_jobs: int) -> int:
+    """Processes for ``n_jobs`` images: the cores this process may use (``PLANTREG_WORKERS``
+    overrides), at most one per image."""
+    import os
+
+    try:
+        n = int(os.environ.get("PLANTREG_WORKERS", "0"))
+    except ValueError:
+        n = 0
+    if n <= 0:
+        try:
+            n = len(os.sched_getaffinity(0))
+        except (AttributeError, OSError):
+            n = os.cpu_count() or 1
+    return max(1, min(n, n_jobs))
+
+
+def _pool_init() -> None:
+    """In each detection process: Ctrl-C and a closed terminal reach the whole process group;
+    the parent decides (and terminates the workers), so the workers ignore them. One OpenCV
+    thread each: the processes already use every core."""
+    import signal
+
+    for sig in ("SIGINT", "SIGHUP"):
+        if hasattr(signal, sig):
+            signal.signal(getattr(signal, sig), signal.SIG_IGN)
+    cv2.setNumThreads(1)
+
+
+def _detect_one(session, pose: str, camera: str, options: DetectOptions | None, thumb: int,
+                cached: Detection | None, unreadable: str = "raise") -> tuple[Detection, np.ndarray | None]:
+    """One image in a worker: its detection (or ``cached``) and a ``thumb``-pixel thumbnail.
+    ``unreadable="fail"``: an unreadable image gives a failed detection saying why."""
+    p = session.pose(pose)
+    path = p.images.get(camera)
+    try:
+        img = read_image(path) if path is not None and (cached is None or thumb) else None
+    except InputError as e:
+        if unreadable == "raise":
+            raise
+        return Detection(pose, camera, FAILED, f"unreadable image: {e}", None, None, (0, 0), False, path,
+                         options or DetectOptions()), None
+    det = cached if cached is not None else detect_view(session, p, camera, options, image=img)
+    if not thumb or img is None:
+        return det, None
+    from .preview import thumbnail
+
+    return det, thumbnail(img, thumb)
+
+
+def detect_views(session, views: list[tuple[str, str]] | set | None = None,
+                 options: dict[tuple[str, str], DetectOptions] | None = None,
+                 progress: Reporter | None = None, thumbnails: int = 0, processes: bool | None = None,
+                 use_cache: bool = True, unreadable: str = "raise") -> Iterator[tuple[Detection, np.ndarray | None]]:
+    """Detect ``views`` (all (pose, camera) pairs if None) and yield ``(Detection, thumbnail)``
+    as each is done (thumbnail None unless ``thumbnails`` > 0 px).
+
+    Detections cached in the session's ``detections.json`` (:mod:`.cache`) whose image, board and
+    options are unchanged are yielded first without detecting; the rest run in a pool of
+    ``spawn`` worker processes (:func:`worker_count`; ``processes`` True always uses one, e.g. for
+    a GUI whose thread must keep the GIL, False never, None when more than one image and core).
+    Progress counts images; cancelling ``progress`` (or closing the generator) terminates the
+    workers at once. New results are added to the cache as they arrive and it is saved at the
+    end, also after a cancel or an error. Unreadable images raise :class:`InputError`, or with
+    ``unreadable="fail"`` become failed detections saying why (the wizard goes on with the others)."""
+    import concurrent.futures as cf
+
+    from .cache import DetectionCache, image_key
+
     progress = ensure_reporter(progress)
     opts = session.detect_options()
     opts.update(options or {})
-    todo = [(p, c) for p in session.poses for c in session.cameras
-            if views is None or (p.name, c) in set(views)]
+    wanted = None if views is None else set(views)
+    todo = [(p.name, c) for p in session.poses for c in session.cameras if wanted is None or (p.name, c) in wanted]
     n = max(1, len(todo))
-    for k, (pose, cam) in enumerate(todo):
-        progress(k / n, f"detecting {pose.name}/{cam}")
-        yield detect_view(session, pose, cam, opts.get((pose.name, cam)))
-    progress(1.0, "detection done")
+    cache = DetectionCache(session) if use_cache else None
+    done, ok = 0, False
+    work: list[tuple[tuple[str, str], Detection | None, dict | None]] = []
+    progress(0.0, f"checking {len(todo)} images")
+    for key in todo:
+        progress.check()
+        o = opts.get(key) or DetectOptions()
+        k = image_key(session, key[0], key[1], o) if cache is not None else None
+        hit = cache.get(key[0], key[1], k, opts.get(key) or DetectOptions()) if cache is not None else None
+        if hit is not None and not thumbnails:
+            done += 1
+            progress(done / n, f"{key[0]}/{key[1]}: cached")
+            yield hit, None
+        else:
+            work.append((key, hit, k))
+    try:
+        n_proc = worker_count(len(work))
+        use_pool = processes if processes is not None else (len(work) > 1 and n_proc > 1)
+        if not work:
+            ok = True
+            return
+        if not use_pool:
+            for key, hit, k in work:
+                progress.check()
+                det, thumb = _detect_one(session, key[0], key[1], opts.get(key), thumbnails, hit, unreadable)
+                if hit is None and cache is not None:
+                    cache.put(det, k)
+                done += 1
+                progress(done / n, f"{key[0]}/{key[1]}: {det.status}")
+                yield det, thumb
+            ok = True
+            return
+        import multiprocessing as mp
+
+        pool = cf.ProcessPoolExecutor(max_workers=n_proc, mp_context=mp.get_context("spawn"), initializer=_pool_init)
+        clean = False
+        try:
+            futs = {pool.submit(_detect_one, session, key[0], key[1], opts.get(key), thumbnails, hit, unreadable):
+                    (key, k, hit)
+                    for key, hit, k in work}
+            pending = set(futs)
+            while pending:
+                progress.check()
+                finished, pending = cf.wait(pending, timeout=0.1, return_when=cf.FIRST_COMPLETED)
+                for fut in finished:
+                    key, k, hit = futs[fut]
+                    try:
+                        det, thumb = fut.result()
+                    except cf.process.BrokenProcessPool:
+                        from ..errors import PlantregError
+
+                        raise PlantregError("a corner detection process ended unexpectedly (out of memory?)") from None
+                    if hit is None and cache is not None and not det.reason.startswith("unreadable image"):
+                        cache.put(det, k)
+                    done += 1
+                    progress(done / n, f"{key[0]}/{key[1]}: {det.status}")
+                    yield det, thumb
+            clean = True
+        finally:
+            if clean:
+                pool.shutdown(wait=True)
+            else:  # cancelled, an error, or the consumer stopped: no worker may go on
+                procs = list(getattr(pool, "_processes", {}).values())
+                pool.shutdown(wait=False, cancel_futures=True)
+                for proc in procs:
+                    proc.terminate()
+                for proc in procs:
+                    proc.join(2.0)
+        ok = True
+    finally:
+        if cache is not None:
+            cache.save()
+    if ok:
+        progress(1.0, "detection done")
 
 
 def check_image_sizes(session, detections: dict[tuple[str, str], Detection]) -> dict[str, tuple[int, int]]:

@@ -1,16 +1,13 @@
-"""Display thumbnails of calibration images and detection with a thumbnail (Qt-free).
+"""Display thumbnails of calibration images (Qt-free).
 
-:func:`detect_with_thumbnail` is what the wizard runs per image in its worker process (see
-:mod:`plantreg_gui.core.process_job`): reading, detecting and shrinking an image all happen
-there, so the GUI process only receives the detection and a 112-pixel thumbnail.
+The wizard's detection workers (:func:`~.detect.detect_views`) read, detect and shrink each
+image, so the GUI process only receives the detection and a 112-pixel :func:`thumbnail`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..progress import Reporter
-from .detect import DetectOptions, Detection, detect_view
 
 
 def to_display(img: np.ndarray) -> np.ndarray:
@@ -48,16 +45,3 @@ def thumbnail(img: np.ndarray, size: int = 120) -> np.ndarray:
     if s < 1:
         d = cv2.resize(d, (max(1, round(w * s)), max(1, round(h * s))), interpolation=cv2.INTER_AREA)
     return np.ascontiguousarray(d)
-
-
-def detect_with_thumbnail(session, pose: str, camera: str, options: DetectOptions | None = None,
-                          size: int = 112, progress: Reporter | None = None) -> tuple[Detection, np.ndarray | None]:
-    """:func:`~.detect.detect_view` of (``pose``, ``camera``) and a ``size``-pixel display
-    thumbnail of the image (None if it has none). Unreadable images raise ``InputError``."""
-    from ..imageio import read_image
-
-    p = session.pose(pose)
-    path = p.images.get(camera)
-    img = read_image(path) if path is not None else None
-    det = detect_view(session, p, camera, options, image=img)
-    return det, (thumbnail(img, size) if img is not None else None)

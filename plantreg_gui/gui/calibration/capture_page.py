@@ -13,6 +13,9 @@ from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
 STATUS_COLOURS = {"found": "#d4edda", "failed": "#f8d7da", "missing": "#e2e3e5", None: "#ffffff"}
+#: how a board was found, when not on the plain image (the variants of core/calibration/detect.py)
+VARIANT_SHORT = {"flat": "background removed", "flat-fine": "background removed", "clahe": "contrast enhanced",
+                 "thorough": "exhaustive search", "full-res": "full resolution"}
 STATUS_TEXT = {"found": "✔ found", "failed": "✖ failed", "missing": "— missing", None: "… not detected yet"}
 
 
@@ -152,6 +155,8 @@ class CapturePage(WizardPage):
             text = "⊘ rejected"  # found but excluded: no green tick
         if status == "found" and det.corners is not None:
             text += f" ({len(det.corners)})"
+            if getattr(det, "variant", "") not in ("", "plain"):
+                text += "\n" + VARIANT_SHORT.get(det.variant, det.variant)
         elif status == "failed" and det.reason:
             r = det.reason.split(" (")[0]
             text += "\n" + (r if len(r) <= 44 else r[:42] + "…")
@@ -164,6 +169,8 @@ class CapturePage(WizardPage):
             tip.append(str(path))
         if det is not None and getattr(det, "reason", None):
             tip.append(f"{status}: {det.reason}")
+        elif det is not None and getattr(det, "variant_text", ""):
+            tip.append(f"found on: {det.variant_text}")
         if excluded:
             tip.append("excluded from calibration (page 3)")
         it.setToolTip("\n".join(tip))
@@ -192,7 +199,8 @@ class CapturePage(WizardPage):
         per_cam = []
         for c in s.camera_names:
             n = sum(1 for p in s.poses if getattr(self.model.detections.get((p.name, c)), "status", None) == "found")
-            per_cam.append(f"{c}: {n}")
+            n_img = sum(1 for p in s.poses if c in p.images)
+            per_cam.append(f"{c}: {n} of {n_img}" + (f" ({100.0 * n / n_img:.0f} %)" if n_img else ""))
         txt = (f"<b>{len(s.poses)} poses × {len(s.camera_names)} cameras</b> — {counts['found']} found, "
                f"{counts['failed']} failed, {counts['missing']} missing"
                + (f", {pending} not detected yet" if pending else "")

@@ -9,8 +9,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ...core.calibration import Detection, calibrate, calibrated_rig, error_tables
-from ...core.calibration.preview import detect_with_thumbnail
+from ...core.calibration import calibrate, calibrated_rig, error_tables
+from ...core.calibration.detect import detect_views
 from ...core.process_job import run_in_process
 from ...core.progress import Reporter, ensure_reporter
 
@@ -20,29 +20,32 @@ Key = tuple[str, str]
 def detect_job(session, options: dict | None, keys: set[Key] | None, sink: Callable[[Any, Any], None],
                progress: Reporter | None = None) -> int:
     """Detect corners in ``keys`` (all images if None), calling ``sink(detection, thumbnail)`` for
-    every result as it arrives. Each image is read, detected and thumbnailed in the worker
-    process (percentile stretches and corner ordering hold the GIL). An unreadable image becomes
-    a failed detection with the reader's message instead of ending the run. Returns the number
-    of detections."""
-    from ...core.errors import InputError
-
+    every result as it arrives. Images are read, detected and thumbnailed in worker processes
+    (:func:`~plantreg_gui.core.calibration.detect.detect_views`: one per core, so the GUI
+    thread keeps the GIL; detections cached in the session's ``detections.json`` are only
+    thumbnailed); one image (a re-detection) goes to the long-lived calculation process, which
+    is already running. An unreadable image becomes a failed detection with the reader's
+    message instead of ending the run. Returns the number of detections."""
     progress = ensure_reporter(progress)
-    opts = session.detect_options()
-    opts.update(options or {})
     todo = [(p.name, c) for p in session.poses for c in session.camera_names
             if keys is None or (p.name, c) in keys]
-    n_total = max(1, len(todo))
-    for k, key in enumerate(todo):
-        progress(k / n_total, f"detecting {key[0]}/{key[1]}")
-        try:
-            det, thumb = run_in_process(detect_with_thumbnail, session, key[0], key[1], opts.get(key),
-                                        progress=progress.sub(k / n_total, (k + 1) / n_total))
-        except InputError as e:  # this view is unreadable: say so, go on with the others
-            det, thumb = Detection(key[0], key[1], "failed", f"unreadable image: {e}", None, None, (0, 0), False,
-                                   session.pose(key[0]).images.get(key[1])), None
+    if len(todo) == 1:
+        results = run_in_process(_detect_list, session, todo, options, progress=progress)
+    else:
+        results = detect_views(session, todo, options, progress, thumbnails=THUMB_PX, processes=True,
+                               unreadable="fail")
+    for det, thumb in results:
         sink(det, thumb if det.status != "missing" else None)
-    progress(1.0, "detection done")
     return len(todo)
+
+
+THUMB_PX = 112
+
+
+def _detect_list(session, todo: list[Key], options: dict | None, progress: Reporter | None = None) -> list:
+    """:func:`detect_views` of a few images in this process (the calculation process's side)."""
+    return list(detect_views(session, todo, options, progress, thumbnails=THUMB_PX, processes=False,
+                             unreadable="fail"))
 
 
 def calibrate_job(session, detections: dict, excluded: set[Key], progress: Reporter | None = None):

@@ -241,6 +241,8 @@ class ReviewPage(WizardPage):
         it.setForeground(QColor("#999999" if ex else ("#c65d00" if weak is not None else col)))
         if d is not None and d.reason:
             it.setToolTip(d.reason)
+        elif d is not None and getattr(d, "variant_text", ""):
+            it.setToolTip(f"found on: {d.variant_text}")
 
     @property
     def _weak(self) -> dict:
@@ -334,6 +336,9 @@ class ReviewPage(WizardPage):
             cap += "not detected yet"
         elif st == "found":
             cap += f"{len(d.corners)} corners found" + (" (polarity inverted)" if getattr(d, "inverted", False) else "")
+            how = getattr(d, "variant_text", "")
+            if how:
+                cap += f"<br><span style='color:#555555'>found on: {how}</span>"
         else:
             cap += f"{st}: {d.reason}"
         self.caption.setText(cap)
