@@ -156,6 +156,11 @@ def _print_summary(session, detections, cal, report) -> None:
     n_found = sum(1 for d in detections.values() if d.found)
     print(f"board found in {n_found} of {sum(1 for d in detections.values() if d.status != 'missing')} images; "
           f"joint RMS {cal.joint_rms_px:.3f} px")
+    from ..core.calibration.detect import VARIANT_TEXT, detection_summary
+
+    for cam, c in detection_summary(detections)["cameras"].items():
+        how = ", ".join(f"{VARIANT_TEXT.get(v, v)} {n}" for v, n in sorted(c["variants"].items(), key=lambda x: -x[1]))
+        print(f"  {cam}: found in {c['found']} of {c['images']} ({100.0 * c['rate']:.1f} %)" + (f"; on: {how}" if how else ""))
     for d in sorted(detections.values(), key=lambda d: d.key):
         if d.status == "failed":
             print(f"  not found: {d.pose}:{d.camera}: {d.reason}")

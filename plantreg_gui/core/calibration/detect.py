@@ -401,12 +401,13 @@ WORK_SIDE = 1280
 MIN_SIDE = 480
 #: What :func:`detect_image` tries, in this order, until the whole board is found: the scalar
 #: image stretched ("plain"); with its background removed and its local contrast normalised at
-#: two scales ("flat", "flat-fine"; :func:`flatten`), each also as its negative for the classic
-#: detector; with CLAHE ("clahe"); the exhaustive searches ("thorough"); and, for downscaled
-#: images, the full-resolution image ("full-res").
-VARIANTS = ("plain", "flat", "flat-fine", "clahe", "thorough", "full-res")
+#: two scales ("flat", "flat-fine"; :func:`flatten`); with CLAHE ("clahe"); flattened at twice the
+#: size for small, far or steep boards ("fine-2x"); the exhaustive searches ("thorough"); and,
+#: for downscaled images, the full-resolution image ("full-res"). On each, the classic detector
+#: (image and negative) then the SB detector (:func:`_find_any`).
+VARIANTS = ("plain", "flat", "flat-fine", "clahe", "fine-2x", "thorough", "full-res")
 VARIANT_TEXT = {"plain": "plain", "flat": "background removed", "flat-fine": "background removed (fine)",
-                "clahe": "CLAHE", "thorough": "exhaustive search", "full-res": "full resolution",
+                "clahe": "CLAHE", "fine-2x": "background removed (fine)", "thorough": "exhaustive search", "full-res": "full resolution",
                 "classic": "OpenCV classic"}
 
 
@@ -439,7 +440,8 @@ def _square_px(size: tuple[int, int], board: Board) -> float:
 
 
 def _variant_images(f: np.ndarray, board: Board, enhance: bool):
-    """Yield (variant, uint8 image, thorough) in the order tried; ``f`` the (working-scale) scalar."""
+    """Yield (variant, uint8 image, thorough, zoom) in the order tried; ``f`` the working-scale
+    scalar, ``zoom`` the image's size relative to ``f`` (2: "fine-2x", small squares doubled)."""
     plain = _stretch(f)
     sq = _square_px((f.shape[1], f.shape[0]), board)
     order = ["clahe", "plain", "flat", "flat-fine"] if enhance else ["plain", "flat", "flat-fine", "clahe"]
@@ -453,9 +455,11 @@ def _variant_images(f: np.ndarray, board: Board, enhance: bool):
             made[v] = flatten(f, max(1.5, sq / 4.0))
         else:
             made[v] = cv2.createCLAHE(clipLimit=3.0, tileGridSize=(8, 8)).apply(plain)
-        yield v, made[v], False
-    yield "thorough", made["plain"], True
-    yield "thorough", made["flat"], True
+        yield v, made[v], False, 1.0
+    if max(f.shape) <= WORK_SIDE:  # a small, far or steep board: its squares doubled
+        yield "fine-2x", flatten(_resize(f, 2.0), max(1.5, sq / 3.0)), False, 2.0
+    yield "thorough", made["plain"], True, 1.0
+    yield "thorough", made["flat"], True, 1.0
 
 
 def _flat_like(f: np.ndarray, variant: str, board: Board) -> np.ndarray:
@@ -500,14 +504,17 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
     size = (f.shape[1], f.shape[0])
     s = work_scale(size)
     fw = _resize(f, s)
+    plain_w = _stretch(fw)
     tried = []
-    for variant, img, thorough in _variant_images(fw, board, enhance):
+    s0 = s
+    for variant, img, thorough, zoom in _variant_images(fw, board, enhance):
         if variant not in tried:
             tried.append(variant)
+        s = s0 * zoom
         c, how = _find_any(img, board.pattern_size, thorough, sb_first=s > 1.0)
         if c is None:
             continue
-        perm = canonical_permutation(c, img if variant != "clahe" else _stretch(fw), board, inverted)
+        perm = canonical_permutation(c, img if variant != "clahe" else plain_w, board, inverted)
         # refined on the image that found them: on rendered lamp-heated boards with known truth the
         # flattened image gives smaller corner errors than the raw scalar (whose lamp gradient
         # biases cornerSubPix) or its linear high-pass
@@ -521,6 +528,7 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         else:
             c = refine_corners(img, c, board)
         return c[perm], variant, s
+    s = s0
     if s < 1.0:  # a board too small for the downscaled image
         tried.append("full-res")
         img = _stretch(f)
@@ -824,6 +832,30 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
             cache.save()
     if ok:
         progress(1.0, "detection done")
+
+
+def detection_summary(detections: dict[tuple[str, str], Detection]) -> dict[str, Any]:
+    """The detection figures a report carries: per camera the images (not missing), boards found,
+    the rate and how many were found by each variant; per image its status, variant, scalar
+    conversion, working scale and the reason of a failure. JSON-ready."""
+    cams: dict[str, dict[str, Any]] = {}
+    views: dict[str, dict[str, Any]] = {}
+    for (pose, cam), d in sorted(detections.items()):
+        if d.status == MISSING:
+            continue
+        c = cams.setdefault(cam, {"images": 0, "found": 0, "rate": 0.0, "variants": {}})
+        c["images"] += 1
+        v: dict[str, Any] = {"status": d.status, "variant": d.variant, "conversion": d.conversion,
+                             "scale": round(float(d.scale), 4)}
+        if d.found:
+            c["found"] += 1
+            c["variants"][d.variant or "?"] = c["variants"].get(d.variant or "?", 0) + 1
+        else:
+            v["reason"] = d.reason
+        views[f"{pose}:{cam}"] = v
+    for c in cams.values():
+        c["rate"] = c["found"] / c["images"] if c["images"] else 0.0
+    return {"cameras": cams, "views": views}
 
 
 def check_image_sizes(session, detections: dict[tuple[str, str], Detection]) -> dict[str, tuple[int, int]]:

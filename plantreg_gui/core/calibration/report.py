@@ -18,7 +18,7 @@ from ..imageio import atomic_files
 from ..progress import Reporter, ensure_reporter
 from ..rig import Rig
 from .calibrate import Calibration, calibrate
-from .detect import Detection, DetectOptions, detect_session
+from .detect import Detection, DetectOptions, detect_session, detection_summary
 from .metrics import CalibrationReport, error_tables
 from .session import Session, view_key
 
@@ -88,7 +88,10 @@ def write_calibration(rig: Rig | None, rig_path: str | Path | None, report: Cali
     stale: list[Path] = []
     if report is not None and report_path is not None:
         rp = Path(report_path)
-        texts[rp] = json.dumps(report.to_dict(), indent=2, default=_json_default) + "\n"
+        d = report.to_dict()
+        if getattr(report, "detection", None):  # detection figures (detect.detection_summary), when known
+            d["detection"] = report.detection
+        texts[rp] = json.dumps(d, indent=2, default=_json_default) + "\n"
         for name, text in report.csv_tables().items():
             texts[rp.parent / f"{rp.stem}_{name}.csv"] = text
         stale = [p for p in report_files(rp)[1:] if p not in texts]
@@ -125,4 +128,5 @@ def run_session(session: Session, excluded: set[tuple[str, str]] | frozenset | N
     detections = {d.key: d for d in detect_session(session, options, progress.sub(0.0, 0.6))}
     cal = calibrate(session, detections, excluded, progress.sub(0.6, 0.75))
     report = error_tables(session, cal, detections, excluded, progress.sub(0.75, 1.0), roi=roi)
+    report.detection = detection_summary(detections)
     return detections, cal, report

@@ -14,7 +14,7 @@ from .widgets import banner, qpixmap, set_banner
 
 STATUS_COLOURS = {"found": "#d4edda", "failed": "#f8d7da", "missing": "#e2e3e5", None: "#ffffff"}
 #: how a board was found, when not on the plain image (the variants of core/calibration/detect.py)
-VARIANT_SHORT = {"flat": "background removed", "flat-fine": "background removed", "clahe": "contrast enhanced",
+VARIANT_SHORT = {"flat": "background removed", "flat-fine": "background removed", "fine-2x": "background removed", "clahe": "contrast enhanced",
                  "thorough": "exhaustive search", "full-res": "full resolution"}
 STATUS_TEXT = {"found": "✔ found", "failed": "✖ failed", "missing": "— missing", None: "… not detected yet"}
 

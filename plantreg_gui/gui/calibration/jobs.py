@@ -10,7 +10,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ...core.calibration import calibrate, calibrated_rig, error_tables
-from ...core.calibration.detect import detect_views
+from ...core.calibration.detect import detect_views, detection_summary
 from ...core.process_job import run_in_process
 from ...core.progress import Reporter, ensure_reporter
 
@@ -55,8 +55,11 @@ def calibrate_job(session, detections: dict, excluded: set[Key], progress: Repor
 
 
 def tables_job(session, calibration, detections: dict, excluded: set[Key], progress: Reporter | None = None):
-    """The error tables, in the worker process (meshing every depth map holds the GIL)."""
-    return run_in_process(error_tables, session, calibration, detections, excluded, progress=progress)
+    """The error tables, in the worker process (meshing every depth map holds the GIL), with the
+    detection figures the report carries (rate per camera, variant per image)."""
+    report = run_in_process(error_tables, session, calibration, detections, excluded, progress=progress)
+    report.detection = detection_summary(detections)
+    return report
 
 
 def demo_job(folder: Path, progress: Reporter | None = None) -> Path:
