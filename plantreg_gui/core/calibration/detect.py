@@ -468,6 +468,19 @@ def _flat_like(f: np.ndarray, variant: str, board: Board) -> np.ndarray:
     return flatten(f, max(2.0, sq / 2.0) if variant != "flat-fine" else max(1.5, sq / 4.0))
 
 
+def _settle_classic(img: np.ndarray, corners: np.ndarray, board: Board) -> np.ndarray | None:
+    """The classic detector's corners (the quads' corners, ~1 px off) moved onto the saddle
+    points; None when one would move further than a fifth of the corner spacing (at least 2 px):
+    then it did not sit on a corner it could find."""
+    c = refine_corners(img, corners, board, guard=False)
+    g = corners.reshape(board.rows, board.columns, 2)
+    spacing = min(float(np.linalg.norm(np.diff(g, axis=0), axis=2).min()),
+                  float(np.linalg.norm(np.diff(g, axis=1), axis=2).min()))
+    if float(np.linalg.norm(c - corners, axis=1).max()) > max(2.0, 0.2 * spacing):
+        return None
+    return c
+
+
 def _find_any(img: np.ndarray, pattern: tuple[int, int], thorough: bool,
               sb_first: bool = False) -> tuple[np.ndarray | None, str]:
     """Cheap first: the classic detector on the image and on its negative (it only finds dark
@@ -519,7 +532,12 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         # flattened image gives smaller corner errors than the raw scalar (whose lamp gradient
         # biases cornerSubPix) or its linear high-pass
         if how == "classic":  # its corners are the quads' corners: bring them onto the saddle points first
-            c = refine_corners(img, c, board, guard=False)
+            c = _settle_classic(img, c, board)
+            if c is None:  # a corner ran off (faint, or beside a hot edge): the SB detector decides
+                c, how = _find_any(img, board.pattern_size, False, sb_first=True)
+                if how != "sb":
+                    continue
+                perm = canonical_permutation(c, img if variant != "clahe" else plain_w, board, inverted)
         if s > 1.0:  # upscaled: refine on the upscaled variant image, then back to image px
             c = _to_image_px(refine_corners(img, c, board), s)
         elif s < 1.0:  # downscaled: refine on the full-resolution image (cornerSubPix needs no stretch)
@@ -539,7 +557,8 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         if c is not None:
             perm = canonical_permutation(c, img, board, inverted)
             if how == "classic":
-                c = refine_corners(img, c, board, guard=False)
+                c2 = _settle_classic(img, c, board)
+                c = c if c2 is None else c2
             return refine_corners(img, c, board)[perm], "full-res", 1.0
     return None, tried, s
 
