@@ -52,7 +52,10 @@ def test_detection_matches_projected_truth(solved):
         uv, _ = truth["rig"].camera(cam).project(obj @ R.T + t)
         err = np.linalg.norm(d.corners - uv, axis=1)
         # same order (a 180-degree flip of the inverted thermal board would give errors of ~100 px)
-        assert err.max() < 1.5 and np.median(err) < 0.2, (pose, cam, err.max())
+        # the thermal board is lamp-heated with a checker of a few percent of the image range: its
+        # corners are noisier than the others'
+        faint = cam == "thermal"
+        assert err.max() < (3.0 if faint else 1.5) and np.median(err) < (0.35 if faint else 0.2), (pose, cam, err.max())
     n = len(session.poses)
     assert 15 <= n <= 20
     # the wide cameras see every pose; the narrow ones most of them
