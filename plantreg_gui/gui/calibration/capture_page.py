@@ -200,7 +200,9 @@ class CapturePage(WizardPage):
         for c in s.camera_names:
             n = sum(1 for p in s.poses if getattr(self.model.detections.get((p.name, c)), "status", None) == "found")
             n_img = sum(1 for p in s.poses if c in p.images)
-            per_cam.append(f"{c}: {n} of {n_img}" + (f" ({100.0 * n / n_img:.0f} %)" if n_img else ""))
+            done = all((p.name, c) in self.model.detections for p in s.poses if c in p.images)
+            # the rate only when the camera's detection is complete (a running count is no rate)
+            per_cam.append(f"{c}: {n} of {n_img}" + (f" ({100.0 * n / n_img:.0f} %)" if n_img and done else ""))
         txt = (f"<b>{len(s.poses)} poses × {len(s.camera_names)} cameras</b> — {counts['found']} found, "
                f"{counts['failed']} failed, {counts['missing']} missing"
                + (f", {pending} not detected yet" if pending else "")
