@@ -236,7 +236,7 @@ def test_depth_table_is_near_zero_without_tof_bias(tmp_path):
         for t in ("ir", "thermal", "hyperspectral"):
             if o != t:
                 # the rendered thermal board is lamp-heated with a faint checker (its corners are
-                # noisier, ~0.3 px median): pairs with it get more room
+                # noisier, 0.25-0.45 px median per view): pairs with it get more room
                 limit = 0.5 if "thermal" in (o, t) else 0.25
                 assert out[0.0].depth[o][t]["px"] < limit, (o, t, out[0.0].depth[o][t])
                 assert out[6.0].depth[o][t]["px"] > out[0.0].depth[o][t]["px"]
