@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,8 @@ def image_key(session, pose: str, camera: str, options: DetectOptions) -> dict[s
         return None
     try:
         st = Path(path).stat()
+        if not stat.S_ISREG(st.st_mode):  # a FIFO would block the read: the reader names it
+            return None
         h = hashlib.blake2b(digest_size=16)
         with open(path, "rb") as f:
             for block in iter(lambda: f.read(1 << 20), b""):

@@ -524,7 +524,9 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         if variant not in tried:
             tried.append(variant)
         s = s0 * zoom
-        c, how = _find_any(img, board.pattern_size, thorough, sb_first=s > 1.0)
+        # classic first only on the plain image: on a faint flattened board its quads (and so its
+        # corners) are several px off, beyond what cornerSubPix can pull back
+        c, how = _find_any(img, board.pattern_size, thorough, sb_first=s > 1.0 or variant != "plain")
         if c is None:
             continue
         perm = canonical_permutation(c, img if variant != "clahe" else plain_w, board, inverted)
