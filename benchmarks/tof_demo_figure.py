@@ -21,8 +21,8 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from plantreg_gui.core.display import to_rgb8
-    from plantreg_gui.core.register import filter_depth, register, RegistrationParams
+    from plantreg_gui.core.display.display import to_rgb8
+    from plantreg_gui.core.registration.register import filter_depth, register, RegistrationParams
     from plantreg_gui.core.synthetic import demo_rig, make_plant_scene, render_recording
     from plantreg_gui.core.synthetic.demo import THERMAL_BLUR_PX, TOF_DEPTH_NOISE
 

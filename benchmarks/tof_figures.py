@@ -14,8 +14,9 @@ import sys, numpy as np
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1] / "tests"))
 import test_tof as T
 from test_register import figures
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.register import register, RegistrationParams, CASE_P1
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.registration.register import register, RegistrationParams
+from plantreg_gui.core.registration.cases import Case
 from plantreg_gui.core.synthetic import MAT_LEAF0, render_depth
 from plantreg_gui.core.synthetic.render import observable_views
 from plantreg_gui.core.synthetic.textures import Appearance
@@ -32,12 +33,12 @@ for seed in [int(s) for s in sys.argv[1].split(",")]:
         match = gt.matchable[src] & in_roi(rig, gt)
         ob = obs[src] & match
         bound = ob.sum() / match.sum()
-        cov_ob = ((res.cases[src] == CASE_P1) & ob).sum() / ob.sum()
+        cov_ob = ((res.cases[src] == Case.P1) & ob).sum() / ob.sum()
         print(f"| {seed} | {src} | {f['median']:.3f} | {f['p90']:.3f} | {100*f['p1_coverage']:.1f} % | {100*f['p1_visible']:.2f} % | {100*f['occluded_p2_p32']:.1f} % | {100*n['occluded_p2_p32']:.1f} % | {o['median']:.3f} / {100*o['occluded_p2_p32']:.1f} % | {100*i['p1_coverage']:.1f} % / {100*i['occluded_p2_p32']:.1f} % | {100*bound:.1f} % | {100*cov_ob:.2f} % |", flush=True)
     cam = rig.camera("ir"); o_, d_ = cam.rays_rig(); _t, prim, bary = scene.cast(o_, d_); hit = prim >= 0
     s = scene.surface(prim[hit], bary[hit]); Tt = np.full(len(d_), np.nan)
     Tt[hit] = Appearance(scene).temperature(s["points"], s["material"], s["uv"]); Tt = Tt.reshape(cam.shape)
     leaf = gt.material >= MAT_LEAF0
-    reg = res.registered["thermal"]; p1 = (res.cases["thermal"] == CASE_P1) & leaf; mx = res.mixed["thermal"]
+    reg = res.registered["thermal"]; p1 = (res.cases["thermal"] == Case.P1) & leaf; mx = res.mixed["thermal"]
     sel = p1 & ~mx
     print(f"TEMP | {seed} | {np.mean(reg[p1]) - np.mean(Tt[p1]):+.3f} °C | {np.mean(reg[sel]) - np.mean(Tt[sel]):+.3f} °C | {100*(p1&mx).sum()/p1.sum():.1f} % | {np.mean(reg[p1&mx]) - np.mean(Tt[p1&mx]):+.2f} °C |", flush=True)

@@ -21,7 +21,7 @@ PLANTS = ("01grapevine", "02leopard_lily", "03areca_palm", "04philodendron", "05
 
 
 def main() -> None:
-    from plantreg_gui.core.register import RegistrationParams, filter_depth
+    from plantreg_gui.core.registration.register import RegistrationParams, filter_depth
 
     ap = argparse.ArgumentParser()
     here = Path(__file__).resolve().parents[2]

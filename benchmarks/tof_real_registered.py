@@ -24,9 +24,10 @@ ROOT = Path(__file__).resolve().parents[1]
 def main() -> None:
     import pyvista as pv
 
-    from plantreg_gui.core.recording import Recording
-    from plantreg_gui.core.register import CASE_P1, RegistrationParams, register
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.data.recording import Recording
+    from plantreg_gui.core.registration.register import RegistrationParams, register
+    from plantreg_gui.core.registration.cases import Case
+    from plantreg_gui.core.camera.rig import Rig
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--plant", default="01grapevine")
@@ -40,7 +41,7 @@ def main() -> None:
     clouds = []
     for name, res, drop in (("before", before, False), ("after", after, True)):
         th = np.asarray(res.registered["thermal"])
-        sel = (res.cases["thermal"] == CASE_P1) & np.isfinite(th)
+        sel = (res.cases["thermal"] == Case.P1) & np.isfinite(th)
         n_p1 = int(sel.sum())
         if drop:
             sel &= ~res.mixed["thermal"]
@@ -79,15 +80,14 @@ def _silhouettes(rig, rec, out: Path) -> None:
     raw thermal image: where they miss the leaf edges, the rig's thermal pose is off."""
     import cv2
 
-    from plantreg_gui.core.raycast import project_points
-    from plantreg_gui.core.register import Registrar
+    from plantreg_gui.core.registration.register import Registrar
 
     reg = Registrar(rig, rec)
     reg.prepare()
     unc = reg.meshes.uncertainty
     top, edges = unc.vertices[: unc.n_vertices // 2], unc.triangles[: unc.n_triangles // 2, :2]
     cam = rig.camera("thermal")
-    pv, _z = project_points(cam, top.astype(np.float64))
+    pv, _z = cam.project(top.astype(np.float64))
     raw = np.asarray(rec.images["thermal"], dtype=np.float64)
     lo, hi = np.percentile(raw, [1, 99.5])
     S = 2

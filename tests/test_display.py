@@ -5,8 +5,8 @@ import warnings
 import numpy as np
 import pytest
 
-from plantreg_gui.core import display
-from plantreg_gui.core.display import (
+from plantreg_gui.core.display import display
+from plantreg_gui.core.display.display import (
     AREA_COLOURS, BACKGROUND_RGB, CASE_COLOURS, auto_limits, blend, checkerboard, mosaic, overlay,
     pca_false_colour, pca_scores, to_rgb8,
 )

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from plantreg_gui.core import export
+from plantreg_gui.core.export import export
 from plantreg_gui.core.errors import InputError
 from plantreg_gui.core.progress import Reporter
 

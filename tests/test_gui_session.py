@@ -33,7 +33,7 @@ def test_session_is_qt_free():
 
 
 def test_session_events_and_readout(demo_registered):
-    from plantreg_gui.core.cases import case_label
+    from plantreg_gui.core.registration.cases import case_label
     from plantreg_gui.gui.registration.session import RegistrationSession
 
     s = RegistrationSession()
@@ -63,7 +63,7 @@ def test_session_events_and_readout(demo_registered):
 
 
 def test_display_settings_rerender_every_place(demo_registered):
-    from plantreg_gui.core import display
+    from plantreg_gui.core.display import display
     from plantreg_gui.gui.registration.model import DisplaySettings
     from plantreg_gui.gui.registration.session import RegistrationSession
 
@@ -147,7 +147,7 @@ def test_layer_titles_say_each_thing_once():
 
 @pytest.mark.gui
 def test_views_show_the_session(registered_workspace):
-    from plantreg_gui.core import display
+    from plantreg_gui.core.display import display
 
     w = registered_workspace
     r = w.result
@@ -324,7 +324,7 @@ def test_hyperspectral_false_colour_is_the_same_raw_and_registered(demo_register
     """Defect 10: the PCA false colour was fitted separately on the raw and the registered cube, so
     one leaf had two colours. Both now use the raw cube's basis: a registered pixel has the colour
     of the raw pixel it was sampled from."""
-    from plantreg_gui.core import display
+    from plantreg_gui.core.display import display
     from plantreg_gui.gui.registration.session import RegistrationSession
 
     s = RegistrationSession()
@@ -376,7 +376,7 @@ def test_display_settings_are_remembered(registered_workspace, qtbot):
 
 @pytest.mark.gui
 def test_colour_bars_give_the_limits_in_units(registered_workspace, qtbot):
-    from plantreg_gui.core import display
+    from plantreg_gui.core.display import display
     from plantreg_gui.gui.registration.model import DisplaySettings
 
     w = registered_workspace

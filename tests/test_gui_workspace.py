@@ -71,9 +71,9 @@ def ws(qapp, demo_dir, tmp_path_factory):
 
 
 def test_raw_images_shown_before_registration(ws, demo_dir):
-    from plantreg_gui.core import display
-    from plantreg_gui.core.recording import Recording
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.display import display
+    from plantreg_gui.core.data.recording import Recording
+    from plantreg_gui.core.camera.rig import Rig
 
     rig = Rig.load(demo_dir / "rig.json")
     rec = Recording.load(demo_dir / "recording", rig)
@@ -104,7 +104,7 @@ def test_gui_thread_responsive_during_registration(ws):
 
 
 def test_side_by_side_shows_display_rendering_of_registered_arrays(ws):
-    from plantreg_gui.core import display
+    from plantreg_gui.core.display import display
 
     r = ws.result
     ws.set_view("side-by-side")
@@ -147,7 +147,7 @@ def test_linked_cursor_and_readout_in_units(ws):
 
 
 def test_display_controls_recolour_every_view(ws, qapp):
-    from plantreg_gui.core import display
+    from plantreg_gui.core.display import display
     from plantreg_gui.gui.registration.model import DisplaySettings
 
     r = ws.result
@@ -333,7 +333,7 @@ def test_export_dialog_needs_a_folder_and_a_part(qapp, tmp_path):
     nothing ticked would write an empty folder: Export stays disabled until both are given."""
     from PySide6.QtWidgets import QDialogButtonBox
 
-    from plantreg_gui.core.export import OUTPUTS
+    from plantreg_gui.core.export.export import OUTPUTS
     from plantreg_gui.gui.registration.export_dialog import ExportDialog
 
     dlg = ExportDialog(tmp_path / "out")
@@ -387,7 +387,7 @@ def test_cancel_registration(ws, qapp):
 def test_worker_error_becomes_a_dialog(qapp, demo_dir, tmp_path):
     from PySide6.QtWidgets import QMessageBox
 
-    from plantreg_gui.core.imageio import write_tiff
+    from plantreg_gui.core.io.imageio import write_tiff
     from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
 
     rec = tmp_path / "recording"
@@ -411,7 +411,7 @@ def test_worker_error_becomes_a_dialog(qapp, demo_dir, tmp_path):
 
 # ---------------------------------------------------------------------- Plant3DImageReg
 def test_plant3d_reader_and_nominal_optics(shared_data):
-    from plantreg_gui.core import plant3d
+    from plantreg_gui.core.data import plant3d
 
     folder = shared_data / "plant3dimagereg"
     plants = plant3d.list_plants(folder)

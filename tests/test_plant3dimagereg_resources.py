@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from plantreg_gui.core.landmarks import LandmarkSet
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.data.landmarks import LandmarkSet
+from plantreg_gui.core.camera.rig import Rig
 
 ROOT = Path(__file__).resolve().parents[1]
 RES = ROOT / "resources" / "plant3dimagereg"
@@ -66,7 +66,7 @@ def test_landmarks_agree_with_the_two_eye_readings():
 
 @needs_data
 def test_every_recording_loads_against_the_fitted_rig():
-    from plantreg_gui.core.recording import Recording
+    from plantreg_gui.core.data.recording import Recording
 
     rig = Rig.load(RES / "rig.json")
     for p in PLANTS:
@@ -76,7 +76,7 @@ def test_every_recording_loads_against_the_fitted_rig():
 
 @needs_data
 def test_landmarks_sit_on_valid_plant_depth_and_the_fitted_rig_explains_the_hyperspectral_ones():
-    from plantreg_gui.core.rigfit import evaluate_landmarks, landmark_depth, load_recording_landmarks
+    from plantreg_gui.core.rigfit.rigfit import evaluate_landmarks, landmark_depth, load_recording_landmarks
 
     rig = Rig.load(RES / "rig.json")
     recs = load_recording_landmarks(rig, LandmarkSet.load(RES / "landmarks.json", rig))
@@ -108,7 +108,7 @@ def test_heldout_landmarks_are_valid_and_were_kept_out_of_the_fit():
 def test_the_fitted_rig_predicts_the_heldout_thermal_landmarks():
     """An independent check of the shipped thermal pose on pairs it was not fitted to. Measured
     (README, "Fit"): 1.3-5.8 px, median 3.6 px; the bounds leave ~1.5 px for reading noise."""
-    from plantreg_gui.core.rigfit import evaluate_landmarks, load_recording_landmarks
+    from plantreg_gui.core.rigfit.rigfit import evaluate_landmarks, load_recording_landmarks
 
     rig = Rig.load(RES / "rig.json")
     recs = load_recording_landmarks(rig, LandmarkSet.load(RES / "landmarks_heldout.json", rig))

@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 
 from plantreg_gui.core.errors import InputError
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.refine import RefineParams, landmark_residuals, landmark_source, refine_rig
-from plantreg_gui.core.register import CASE_P1, Registrar
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.rigfit.refine import RefineParams, landmark_residuals, landmark_source, refine_rig
+from plantreg_gui.core.registration.register import Registrar
+from plantreg_gui.core.registration.cases import Case
+from plantreg_gui.core.camera.rig import Rig
 from plantreg_gui.core.synthetic import demo_rig, ground_truth, make_plant_scene, render_recording
 from plantreg_gui.core.synthetic.landmarks import perturb_rig
 
@@ -36,7 +37,7 @@ def registration_errors(rig: Rig, rec: Recording, gt, truth: Rig) -> dict[str, n
         roi = np.all((P >= truth.roi_min) & (P <= truth.roi_max), axis=2)
     out = {}
     for src in res.cases:
-        m = (res.cases[src] == CASE_P1) & gt.matchable[src] & roi
+        m = (res.cases[src] == Case.P1) & gt.matchable[src] & roi
         out[src] = np.linalg.norm(res.source_uv[src] - gt.uv[src], axis=2)[m]
     return out
 

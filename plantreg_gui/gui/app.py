@@ -42,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     import multiprocessing
 
-    multiprocessing.freeze_support()  # the wizard's worker process (core/process_job.py) in a frozen app
+    multiprocessing.freeze_support()  # the wizard's worker process (core/jobs/process_job.py) in a frozen app
     args = build_parser().parse_args(argv)
     try:
         w, h = (int(x) for x in args.size.lower().split("x"))

@@ -21,7 +21,7 @@ HEAVY_MODULES: tuple[str, ...] = ("pyvista", "pyvistaqt", "vtkmodules.vtkInterac
 
 def preload(modules: tuple[str, ...] = HEAVY_MODULES, open3d: bool = True) -> float:
     """Import ``modules`` on the calling (GUI) thread, and with ``open3d`` Open3D's compiled core
-    (``core/o3d_core.py``); returns the seconds it took. A module that fails to import is left for
+    (``core/geometry/o3d_core.py``); returns the seconds it took. A module that fails to import is left for
     the view that needs it to report.
 
     Why Open3D: its core (the ray caster of every registration, and of the landmark page's
@@ -36,7 +36,7 @@ def preload(modules: tuple[str, ...] = HEAVY_MODULES, open3d: bool = True) -> fl
             pass
     if open3d:
         try:
-            from ..core.o3d_core import open3d_core
+            from ..core.geometry.o3d_core import open3d_core
 
             open3d_core()
         except Exception:  # noqa: BLE001 - reported by the registration that needs it

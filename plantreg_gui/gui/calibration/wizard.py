@@ -148,7 +148,7 @@ class CalibrationWizard(QWidget):
         self.model.set_session(session)
         self._update_nav()
         if session.poses:
-            from ...core.process_job import warm_up
+            from ...core.jobs.process_job import warm_up
 
             warm_up()  # the calibration's process starts importing while corners are detected
             self._ensure(("detect",))

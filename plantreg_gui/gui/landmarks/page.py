@@ -1,4 +1,4 @@
-"""The landmark page: a view of :class:`~plantreg_gui.core.landmark_session.LandmarkSession`.
+"""The landmark page: a view of :class:`~plantreg_gui.core.rigfit.landmark_session.LandmarkSession`.
 
 Left: the depth camera's image (infrared), right: the chosen camera, third: the chosen camera
 registered into the infrared by the current rig (blend / checkerboard / flicker). Click a point
@@ -7,6 +7,9 @@ placement); the residual of every point is drawn next to it (red line: where the
 Fit, refine (on workers, with progress and cancel), nudge the camera's pose with keys, undo,
 save. All state and computation are in the session; this widget only shows it and forwards
 the user's actions.
+
+Length: the page's layout, its three image panes and their click handling; the state is in the
+Qt-free :class:`~plantreg_gui.core.rigfit.landmark_session.LandmarkSession`.
 """
 
 from __future__ import annotations
@@ -22,10 +25,10 @@ from PySide6.QtWidgets import (
     QVBoxLayout, QWidget,
 )
 
-from ...core import modality
-from ...core.display import blend, checkerboard, default_tile, to_rgb8
+from ...core.camera import modality
+from ...core.display.display import blend, checkerboard, default_tile, to_rgb8
 from ...core.errors import PlantregError
-from ...core.landmark_session import LandmarkSession, OverlayImages
+from ...core.rigfit.landmark_session import LandmarkSession, OverlayImages
 from ...core.progress import Reporter
 from ..workers import Worker, show_error
 from ..registration.image_views import ColourBar
@@ -491,7 +494,7 @@ class LandmarkPage(QWidget):
             if rep:
                 text.append("\nBefore the nudges:")
         if "per_camera" in rep:
-            from ...core.rigfit import format_report
+            from ...core.rigfit.rigfit import format_report
 
             text.append(format_report(rep))
         if "refine" in rep or "cameras" in rep:

@@ -13,7 +13,8 @@ from PySide6.QtWidgets import (
 
 import numpy as np
 
-from ...core import display, modality
+from ...core.display import display
+from ...core.camera import modality
 from .model import COLORMAPS, DisplaySettings, Layer
 
 

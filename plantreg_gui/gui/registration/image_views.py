@@ -4,6 +4,9 @@ An :class:`ImageView` shows an (H, W, 3) uint8 array as a QImage pixmap (plus an
 RGBA overlay and a crosshair). Views in one :class:`ViewLink` share zoom, scroll position and
 cursor, as 3D Slicer's linked compare views do. Scene coordinates are image pixels with pixel
 centres at integer + 0.5 (Qt's pixmap corner convention): pixel (row, col) = floor(y), floor(x).
+
+Length: the raw and side-by-side views share the image canvas, its overlays, region drawing and
+read-out; a module per view would import the canvas and little else.
 """
 
 from __future__ import annotations
@@ -374,7 +377,7 @@ class ColourBar(QWidget):
         if cmap is None or limits is None:
             self.hide()
             return
-        from ...core import display
+        from ...core.display import display
 
         lut = display.colormap_lut(cmap)
         ramp = np.ascontiguousarray(np.repeat(lut[None, :, :], 10, axis=0))

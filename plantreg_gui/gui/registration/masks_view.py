@@ -12,8 +12,8 @@ from PySide6.QtWidgets import (
     QSlider, QSplitter, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
 )
 
-from ...core import display
-from ...core.cases import AREA_NAMES, CASE_NAMES
+from ...core.display import display
+from ...core.registration.cases import AREA_NAMES, CASE_NAMES
 from .image_views import ImageView
 from .model import case_table
 

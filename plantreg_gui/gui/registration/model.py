@@ -1,7 +1,7 @@
 """What the registration workspace shows, computed without Qt.
 
 The widgets only display what this module computes: display renderings of images (through
-:func:`plantreg_gui.core.display.to_rgb8`, the same rendering as the CLI previews), read-outs
+:func:`plantreg_gui.core.display.display.to_rgb8`, the same rendering as the CLI previews), read-outs
 of every modality at a pixel in its units, and the multimodal point cloud as arrays. Keeping it
 Qt-free means it can be tested headless and used on a worker thread.
 """
@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from ...core import display
-from ...core import modality as _mod
-from ...core.depth import to_millimetres
+from ...core.display import display
+from ...core.camera import modality as _mod
+from ...core.geometry.depth import to_millimetres
 
 DEPTH = "depth"  # pseudo-modality: z of the hit point (registered) or the raw depth map
 

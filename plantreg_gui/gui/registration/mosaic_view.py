@@ -9,7 +9,7 @@ from PySide6.QtWidgets import (
     QCheckBox, QComboBox, QHBoxLayout, QLabel, QSlider, QSpinBox, QVBoxLayout, QWidget,
 )
 
-from ...core import display
+from ...core.display import display
 from .image_views import ImageView
 
 MODES = {"mosaic": "Mosaic (all modalities)", "checkerboard": "Checkerboard A | B", "blend": "Blend A → B"}

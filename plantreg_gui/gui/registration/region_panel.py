@@ -1,7 +1,7 @@
 """The region tool's panel: choose rectangle or polygon, draw it on the registered images (Side by
 side), read the chosen source's statistics over it, export them as CSV.
 
-The statistics are computed by the core (:mod:`plantreg_gui.core.region`) through the session;
+The statistics are computed by the core (:mod:`plantreg_gui.core.registration.region`) through the session;
 this panel only shows ``session.region_stats`` and asks for a file name.
 """
 

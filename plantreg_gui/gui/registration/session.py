@@ -17,6 +17,9 @@ Events (``session.events.<name>``; callbacks get the arguments listed):
 * ``masks_source()`` the source camera whose cases the masks view and the read-out use
 * ``busy()``        a job started or ended (``session.busy``)
 * ``region()``      the region (``session.region``) or its statistics (``region_stats``) changed
+
+Length: the workspace's one model (sources, result, layers, display settings, cursor, region)
+and the worker functions that feed it; its event list above is the index.
 """
 
 from __future__ import annotations
@@ -27,12 +30,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ...core import modality
-from ...core.cases import Case, area_label, case_label
-from ...core.depth import to_millimetres
+from ...core.camera import modality
+from ...core.registration.cases import Case, area_label, case_label
+from ...core.geometry.depth import to_millimetres
 from ...core.errors import InputError
-from ...core.recording import Recording
-from ...core.rig import Rig
+from ...core.data.recording import Recording
+from ...core.camera.rig import Rig
 from .model import (
     DEPTH, Cloud, DisplaySettings, Layer, build_cloud, colour_bar_of, pca_basis, raw_layers, registered_layers,
     render,
@@ -117,7 +120,7 @@ DEMO_IN_PROCESS = True
 
 def demo_job(folder: Path, settings, progress) -> dict:
     from ...core import synthetic
-    from ...core.procs import call_in_process
+    from ...core.jobs.procs import call_in_process
 
     progress(0.0, "writing the demo rig and recording")
     # the calibration session is the wizard's business; leaving it out halves the start-up
@@ -132,12 +135,11 @@ def demo_job(folder: Path, settings, progress) -> dict:
 
 def register_job(registrar, rig: Rig, rec: Recording, target: str, settings, progress, params=None) -> dict:
     """Register (reusing ``registrar``'s meshes), render the layers and build the point cloud.
-    ``params`` (RegistrationParams) for a new registrar."""
-    from ...core.register import Registrar
+    ``params`` (RegistrationParams) for a new registrar (the pipeline's :func:`register`, as the
+    command line's)."""
+    from ...core.pipeline.pipeline import register
 
-    if registrar is None:
-        registrar = Registrar(rig, rec, params)
-    result = registrar.register(target, progress.sub(0.0, 0.85))
+    registrar, result = register(rig, rec, target, params, progress.sub(0.0, 0.85), registrar=registrar)
     layers = registered_layers(result, rig)
     pca = raw_pca(rec, rig, settings)
     renders = render_layers(layers, settings, progress.sub(0.85, 0.97), pca)
@@ -158,7 +160,7 @@ def register_job(registrar, rig: Rig, rec: Recording, target: str, settings, pro
 
 
 def plant3d_job(folder: Path, plant: str, settings, progress) -> dict:
-    from ...core import plant3d
+    from ...core.data import plant3d
 
     p = plant3d.load_plant(folder, plant, progress.sub(0.0, 0.5))
     layers = []
@@ -177,7 +179,7 @@ def plant3d_job(folder: Path, plant: str, settings, progress) -> dict:
 
 def mask_of(shape: tuple[int, int], region: tuple[str, Any]) -> np.ndarray:
     """(H, W) bool of a session region (("rect", (x0, y0, x1, y1)) or ("polygon", [(x, y), ...]))."""
-    from ...core.region import region_mask
+    from ...core.registration.region import region_mask
 
     kind, geom = region
     return region_mask(shape, **({"rect": geom} if kind == "rect" else {"polygon": geom}))
@@ -188,7 +190,7 @@ def region_job(result: Any, region: tuple[str, Any], sources: list[str],
     """core.region statistics of ``sources`` over ``region`` of ``result``; ``info[source]`` =
     (wavelengths or None, unit). Returns the RegionStats in ``sources`` order."""
     from ...core.progress import ensure_reporter
-    from ...core.region import region_stats
+    from ...core.registration.region import region_stats
 
     rep = ensure_reporter(progress)
     mask = mask_of(result.shape, region)
@@ -202,7 +204,7 @@ def region_job(result: Any, region: tuple[str, Any], sources: list[str],
 
 def region_csv(result: Any, region: tuple[str, Any], sources: list[str], info: dict[str, tuple[Any, str]],
                progress=None) -> str:
-    from ...core.region import stats_csv
+    from ...core.registration.region import stats_csv
 
     kind, geom = region
     desc = (f"rect x {min(geom[0], geom[2]):.1f}-{max(geom[0], geom[2]):.1f} "
@@ -296,7 +298,7 @@ class RegistrationSession:
 
     def __post_init__(self) -> None:
         if self.params is None:
-            from ...core.register import RegistrationParams
+            from ...core.registration.params import RegistrationParams
 
             self.params = RegistrationParams()
 
@@ -450,7 +452,7 @@ class RegistrationSession:
     def set_region(self, kind: str | None, shape: Any = None) -> None:
         """Select a region of the target image: ``("rect", (x0, y0, x1, y1))`` or ``("polygon",
         [(x, y), ...])`` in target pixel coordinates (pixel (r, c) covers [c, c+1) x [r, r+1));
-        ``None`` clears it. Computes the masks source's statistics over it (core/region.py)."""
+        ``None`` clears it. Computes the masks source's statistics over it (core/registration/region.py)."""
         new = None if kind is None else (kind, shape)
         if new is None and self.region is None:
             return

@@ -4,6 +4,9 @@ The session (Qt-free) holds the rig, recording, result, layers, display settings
 and cursor and emits events; the views (registered in :mod:`.views`) subscribe to it. This
 widget owns only what is Qt's business: the toolbar and menus, the worker threads that run the
 session's jobs (:class:`~plantreg_gui.gui.workers.Worker`), dialogs, recent files and drops.
+
+Length: the window's menus, toolbar, views, drag and drop, recent files and jobs; the state
+is in the Qt-free :class:`~.session.RegistrationSession`.
 """
 
 from __future__ import annotations
@@ -23,10 +26,10 @@ from PySide6.QtWidgets import (
     QStatusBar, QTabWidget, QToolBar, QToolButton, QVBoxLayout, QWidget,
 )
 
-from ...core import plant3d
+from ...core.data import plant3d
 from ...core.errors import InputError, PlantregError
-from ...core.recording import MANIFEST
-from ...core.rig import Rig
+from ...core.data.recording import MANIFEST
+from ...core.camera.rig import Rig
 from ..workers import Worker, show_error
 from .display_controls import DisplayControls
 from .export_dialog import ExportDialog, folder_is_nonempty
@@ -318,7 +321,7 @@ class RegistrationWorkspace(QWidget):
         if ok:
             self.controls.layer.setCurrentText(r.target)
             warnings = list(getattr(r, "warnings", []) or [])
-            if warnings:  # e.g. the ROI cuts off most of the measured depth (core/roi.py)
+            if warnings:  # e.g. the ROI cuts off most of the measured depth (core/geometry/roi.py)
                 self.banner.setText(" ".join(warnings))
                 self.banner.show()
             elif s.plant is None and s.rig is not None:
@@ -481,7 +484,7 @@ class RegistrationWorkspace(QWidget):
         start = self.last_export or self.default_export_folder()
         dlg = ExportDialog(start, self)
         if dlg.exec():
-            self.export(dlg.out(), dlg.what())
+            self.export(dlg.out(), dlg.what(), drop_mixed=dlg.drop_mixed())
 
     def default_export_folder(self) -> Path:
         """Beside the recording; for the demo, in the home folder: the demo lives in a temporary
@@ -495,10 +498,13 @@ class RegistrationWorkspace(QWidget):
             return Path.home() / f"plantreg-demo-registered-{target}"
         return rec.parent / f"registered-{target}"
 
-    def export(self, out: str | Path, what: list[str] | None = None, overwrite: bool = False) -> bool:
-        """Write the result with :func:`write_outputs` on a worker; asks before replacing a
-        non-empty folder. Returns False when nothing was started."""
-        from ...core.export import write_outputs
+    def export(self, out: str | Path, what: list[str] | None = None, overwrite: bool = False,
+               drop_mixed: bool = False) -> bool:
+        """Write the result with the pipeline's :func:`~plantreg_gui.core.pipeline.pipeline.export`
+        (as ``plantreg register`` does) on a worker; asks before replacing a non-empty folder.
+        ``drop_mixed``: NaN where a pixel is flagged mixed (the shown result is not changed).
+        Returns False when nothing was started."""
+        from ...core.pipeline.pipeline import OutputOptions, export
 
         s = self.session
         if s.result is None:
@@ -514,9 +520,10 @@ class RegistrationWorkspace(QWidget):
                 return False
             overwrite = True
         inputs = {"rig": str(s.rig_path)} if s.rig_path else None
-        w = Worker(write_outputs, s.result, s.rig, s.recording, out, overwrite=overwrite, inputs=inputs,
-                   what=what, display_options=s.export_display_options(),
-                   mosaic_tile=self.mosaic_view.tile.value())  # the export's mosaic is the screen's
+        options = OutputOptions(parts=None if what is None else tuple(what), drop_mixed=drop_mixed,
+                                display_options=s.export_display_options(),
+                                mosaic_tile=self.mosaic_view.tile.value())  # the export's mosaic is the screen's
+        w = Worker(export, s.result, s.rig, s.recording, out, options, overwrite=overwrite, inputs=inputs)
         self._start(w, f"Exporting to {out}", self._exported, kind="export")
         return True
 
@@ -712,7 +719,7 @@ class RegistrationWorkspace(QWidget):
     def save_view_png(self, path: str | Path) -> Path:
         """Save the shown view as a PNG: a 2D view as drawn on screen (images, titles, colour bars),
         the 3D view as its rendered scene at the window's size. Returns the path."""
-        from ...core.imageio import write_png
+        from ...core.io.imageio import write_png
 
         path = Path(path)
         key = self.current_view()
@@ -750,7 +757,7 @@ class RegistrationWorkspace(QWidget):
         path = Path(p if p.lower().endswith(".csv") else p + ".csv")
 
         def write(text: str) -> None:
-            from ...core.imageio import atomic_write_text
+            from ...core.io.imageio import atomic_write_text
 
             try:
                 atomic_write_text(path, text)

@@ -14,7 +14,7 @@ import numpy as np, cv2
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[2]))  # the project root (plantreg_gui)
-from plantreg_gui.core.camera import Camera
+from plantreg_gui.core.camera.camera import Camera
 from annotate_view import load, crop_view, hstack
 plant,cam,out=sys.argv[1:4]
 hi,zi,ho,zo=[int(os.environ.get(k,v)) for k,v in (('HI',20),('ZI',5),('HO',36),('ZO',3))]

@@ -28,8 +28,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from plantreg_gui.core.rig import Rig
-from plantreg_gui.core.rigfit import RecordingLandmarks, evaluate_landmarks, fit_rig, landmark_depth, parse_free
+from plantreg_gui.core.camera.rig import Rig
+from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, evaluate_landmarks, fit_rig, landmark_depth, parse_free
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from thermal_eval import RES, all_landmarks, only  # noqa: E402

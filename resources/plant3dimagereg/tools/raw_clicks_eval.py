@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from plantreg_gui.core import rigfit
-from plantreg_gui.core.landmarks import Landmark
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.rig import Rig
-from plantreg_gui.core.rigfit import RecordingLandmarks, fit_rig
+from plantreg_gui.core.rigfit import rigfit
+from plantreg_gui.core.data.landmarks import Landmark
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.camera.rig import Rig
+from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, fit_rig
 
 HERE = Path(__file__).resolve().parent
 RES = HERE.parent

@@ -3,7 +3,7 @@
 Run from this folder with ``PYTHONPATH=../../..``. Subcommands:
 
 ``scan CAM PLANT|all VARIANT [OUT.png]``
-    The refinement's cost (``core/refine.py``'s NID at its finest level, the points and weights
+    The refinement's cost (``core/rigfit/refine.py``'s NID at its finest level, the points and weights
     it uses) along 1-D scans of each pose parameter around ``rig.json``'s pose, with the
     landmark median at each step; the minimum of the cost against the landmark pose (0).
 ``lopo CAM VARIANT MODE``
@@ -36,10 +36,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-import plantreg_gui.core.refine as R
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.rig import Rig
-from plantreg_gui.core.rigfit import evaluate_landmarks
+import plantreg_gui.core.rigfit.refine as R
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.camera.rig import Rig
+from plantreg_gui.core.rigfit.rigfit import evaluate_landmarks
 
 from thermal_eval import RES, fit, load, only
 
@@ -107,7 +107,7 @@ LM_TERM: list = []
 def set_landmark_term(rig: Rig, lm, cam: str, variant: set[str]) -> None:
     """``lmW``: add W * mean(log(1 + r^2 / 3^2)) of the landmarks ``lm`` (r px, Cauchy at 3 px,
     the reading uncertainty) to the NID: landmarks and image in one objective."""
-    from plantreg_gui.core.rigfit import _collect
+    from plantreg_gui.core.rigfit.rigfit import _collect
     LM_TERM.clear()
     w = [float(x[2:]) for x in variant if x.startswith("lm") and x[2:].replace(".", "").isdigit()]
     if not w:

@@ -23,11 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from plantreg_gui.core import rigfit
-from plantreg_gui.core import silhouette as S
-from plantreg_gui.core.landmarks import LandmarkSet
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.rigfit import rigfit
+from plantreg_gui.core.rigfit import silhouette as S
+from plantreg_gui.core.data.landmarks import LandmarkSet
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.camera.rig import Rig
 
 R = Path(__file__).resolve().parents[1]
 PL = "01grapevine 02leopard_lily 03areca_palm 04philodendron 05boston_fern".split()  # weeping fig: no usable mask

@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from plantreg_gui.core.landmarks import Landmark
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.rig import Rig
-from plantreg_gui.core.rigfit import RecordingLandmarks, evaluate_landmarks, fit_rig, parse_free
+from plantreg_gui.core.data.landmarks import Landmark
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.camera.rig import Rig
+from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, evaluate_landmarks, fit_rig, parse_free
 
 HERE = Path(__file__).resolve().parent
 RES = HERE.parent
