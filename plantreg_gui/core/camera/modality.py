@@ -26,7 +26,7 @@ class Modality:
     ``cmap`` default matplotlib colour map of a single band; ``unit`` of the pixel values ('' =
     arbitrary); ``inverted_board`` a calibration board appears as a photographic negative
     (heated board in a thermal camera); ``channels`` expected bands: 1, 3, or 0 = many (cubes);
-    ``label`` for people.
+    ``label`` for people; ``zero_is_missing``: a value <= 0 means "no measurement" (depth maps).
     """
 
     name: str
@@ -36,11 +36,12 @@ class Modality:
     inverted_board: bool = False
     channels: int = 1
     label: str = ""
+    zero_is_missing: bool = False
 
     @property
     def is_colour(self) -> bool:
         """True for colour cameras (their 3 channels are R, G, B, not bands to stretch apart)."""
-        return self.name == "rgb"
+        return self.channels == 3
 
     @property
     def is_cube(self) -> bool:
@@ -56,7 +57,7 @@ MODALITIES: tuple[Modality, ...] = (
              "infrared"),
     Modality("hyperspectral", ("hsi", "hyper", "multispectral", "spectral", "msi"), "gray", "", False, 0,
              "hyperspectral"),
-    Modality("depth", ("range", "distance", "z"), "viridis", "mm", False, 1, "depth"),
+    Modality("depth", ("range", "distance", "z"), "viridis", "mm", False, 1, "depth", zero_is_missing=True),
 )
 
 _BY_NAME: dict[str, Modality] = {}
@@ -99,6 +100,15 @@ def is_cube(name: str | None) -> bool:
     return get(name).is_cube
 
 
+def is_cube_image(name: str | None, bands: int) -> bool:
+    """Whether an image of ``bands`` bands from a camera of modality ``name`` is a spectral cube
+    (band pickers, spectra, PCA false colour, a read-out at one band): the one rule. More than
+    four bands always; four unless the camera is a colour camera (RGBA); three for a cube modality
+    (a hyperspectral camera's own 3-band rendering)."""
+    m = get(name)
+    return bands > 4 or (bands == 4 and not m.is_colour) or (bands == 3 and m.is_cube)
+
+
 def default_cmap(name: str | None) -> str:
     return get(name).cmap
 
@@ -125,5 +135,5 @@ def guess(name: str, channels: int) -> str:
     return "rgb" if channels in (3, 4) else "infrared"
 
 
-__all__ = ["Modality", "MODALITIES", "canonical", "get", "names", "is_colour", "is_cube", "default_cmap",
+__all__ = ["Modality", "MODALITIES", "canonical", "get", "names", "is_colour", "is_cube", "is_cube_image", "default_cmap",
            "unit", "inverted_board", "guess"]

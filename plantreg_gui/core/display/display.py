@@ -432,7 +432,7 @@ def to_rgb8(img: np.ndarray, modality: str | None = None, cmap: str | None = Non
     if a.ndim == 3 and a.shape[2] == 1:
         a = a[:, :, 0]
     if a.ndim == 2:
-        if mod.name == "depth":
+        if mod.zero_is_missing:
             # depth 0 (or negative) means "no measurement", as in Recording.depth_m
             a = a.astype(np.float32)
             with np.errstate(invalid="ignore"):

@@ -153,6 +153,19 @@ def _write_summary(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> st
     return "summary.json"
 
 
+def _write_mask(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str:
+    """``cases/<cam>_edge.png`` (kind ``edges``) or ``flying.png``; returns the relative path.
+    Masks are uint8, 255 = flagged, so any viewer shows them."""
+    if kind == "edges":
+        rel = f"cases/{_safe(cam)}_edge.png"
+        mask = np.asarray(ctx.result.mixed[cam], dtype=bool)
+    else:
+        rel = "flying.png"
+        mask = np.asarray(ctx.result.flying, dtype=bool)
+    write_png(ctx.folder / rel, mask.view(np.uint8) * np.uint8(255))  # 0 / 255 (no int64 intermediate)
+    return rel
+
+
 #: The parts of the output, in writing order: the one place an output is declared. The command
 #: line's ``--outputs``, the GUI's export dialog and the progress weights all read it; adding an
 #: output = one :class:`OutputPart` here (the summary stays last: it lists the files written).
@@ -166,8 +179,9 @@ OUTPUT_PARTS: tuple[OutputPart, ...] = (
     OutputPart("cases", "Case masks per source (PNG, codes 0-6)",
                lambda r, cams: [(f"cases:{c}", 0.3) for c in r.cases], _write_cases),
     OutputPart("edges", "Mixed edge pixels per source (PNG mask)",
-               lambda r, cams: edge_steps(r),
-               lambda ctx, kind, cam, rep: write_edge_step(ctx.folder, ctx.result, kind, cam)),
+               lambda r, cams: [(f"edges:{c}", 0.3) for c in r.mixed], _write_mask),
+    OutputPart("flying", "Flying depth pixels (PNG mask, the depth camera's grid)",
+               lambda r, cams: [("flying", 0.2)] if r.flying is not None else [], _write_mask),
     OutputPart("areas", "Area mask of the target (PNG, codes 4-6)", lambda r, cams: [("areas", 0.3)], _write_areas),
     OutputPart("pointcloud", "Point cloud with every modality's values (PLY)",
                lambda r, cams: [("pointcloud", 2.0 + 0.05 * sum(_bands(r.registered[c]) for c in cams))],
@@ -438,27 +452,6 @@ def check_output_spares_inputs(out: str | Path, inputs: Iterable[str | Path]) ->
 
 
 # ---------------------------------------------------------------------- mixed-pixel and flying-pixel masks
-def edge_steps(result: RegistrationResult) -> list[tuple[str, float]]:
-    """Export steps of the ToF masks: ``edges:<cam>`` per source with a mixed flag, ``flying``."""
-    steps = [(f"edges:{c}", 0.3) for c in result.mixed]
-    if result.flying is not None:
-        steps.append(("flying", 0.2))
-    return steps
-
-
-def write_edge_step(folder: Path, result: RegistrationResult, kind: str, cam: str) -> str:
-    """Write ``cases/<cam>_edge.png`` (kind ``edges``) or ``flying.png`` into ``folder``; returns
-    the relative path. Masks are uint8, 255 = flagged, so any viewer shows them."""
-    if kind == "edges":
-        rel = f"cases/{_safe(cam)}_edge.png"
-        mask = np.asarray(result.mixed[cam], dtype=bool)
-    else:
-        rel = "flying.png"
-        mask = np.asarray(result.flying, dtype=bool)
-    write_png(folder / rel, mask.view(np.uint8) * np.uint8(255))  # 0 / 255 (no int64 intermediate)
-    return rel
-
-
 def tof_summary(result: RegistrationResult) -> dict[str, Any]:
     """The ``tof`` block of ``summary.json``: flying-pixel count, per-source mixed-pixel counts."""
     fly = result.flying

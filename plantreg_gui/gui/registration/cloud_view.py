@@ -370,6 +370,25 @@ class CloudView(QWidget):
         return self
 
     # ------------------------------------------------------------------ teardown
+    # -- the workspace's view hooks (views.py)
+    def on_shown(self) -> None:
+        self.show_staged()  # over several event-loop turns: no stall
+
+    def prepare_screenshot(self) -> None:
+        self.render_now()
+
+    def view_rgb(self):
+        """The rendered scene at the window's size, (H, W, 3) uint8; None before there is one."""
+        import numpy as np
+
+        self.render_now()
+        if self.plotter is None:
+            return None
+        return np.ascontiguousarray(np.asarray(self.plotter.screenshot(None, return_img=True))[..., :3])
+
+    def shutdown(self) -> None:
+        self.close_plotter()
+
     def close_plotter(self) -> None:
         self._stages.cancel()
         if self.plotter is not None:

@@ -47,7 +47,7 @@ def render(img: np.ndarray, modality: str, settings: DisplaySettings | None = No
     false-colour basis of this camera's raw cube, so raw and registered cubes look alike."""
     s = settings or DisplaySettings()
     bands = s.bands
-    if bands is not None and (img.ndim != 3 or img.shape[2] <= 3 and not _mod.is_cube(modality)):
+    if bands is not None and (img.ndim != 3 or not _mod.is_cube_image(modality, img.shape[2])):
         bands = None
     limits = s.limits if s.limits is not None and pca is None else None  # PCA colours have no unit
     return display.to_rgb8(img, modality=modality, cmap=s.cmap, limits=limits, percentiles=s.percentiles,
@@ -56,7 +56,7 @@ def render(img: np.ndarray, modality: str, settings: DisplaySettings | None = No
 
 def pca_basis(raw: np.ndarray, modality: str, settings: DisplaySettings | None = None) -> display.PcaBasis | None:
     """The PCA false-colour basis of a raw cube (None for images that are not cubes)."""
-    if raw.ndim != 3 or raw.shape[2] <= 3 and not _mod.is_cube(modality) or raw.shape[2] == 4:
+    if raw.ndim != 3 or not _mod.is_cube_image(modality, raw.shape[2]):
         return None
     if display.shows_as_rgb(raw.shape[2], modality):  # a 3-band cube is drawn as RGB, raw and registered
         return None
@@ -95,9 +95,14 @@ class Layer:
         return 1 if self.data.ndim == 2 else int(self.data.shape[2])
 
     @property
+    def is_cube(self) -> bool:
+        """A spectral cube (the modality registry's one rule: ``modality.is_cube_image``)."""
+        return _mod.is_cube_image(self.modality, self.bands)
+
+    @property
     def middle_band(self) -> int | None:
         """The band a cube is read out at when none is chosen (None: not a cube)."""
-        return self.bands // 2 if self.bands > 3 else None
+        return self.bands // 2 if self.is_cube else None
 
     def percentile_limits(self, percentiles: tuple[float, float]) -> tuple[float, float]:
         """``display.auto_limits`` of the data (all bands pooled), remembered per percentiles: the

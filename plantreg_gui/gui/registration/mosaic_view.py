@@ -184,6 +184,9 @@ class MosaicView(QWidget):
         self._flick_state ^= 1
         self.update_view()
 
+    def shutdown(self) -> None:  # the workspace's view hook (views.py)
+        self.stop()
+
     def stop(self) -> None:
         self._flick_timer.stop()
 

@@ -330,7 +330,7 @@ class RegistrationSession:
         return name or (self.result.target if self.result is not None else None)
 
     def has_cube(self) -> bool:
-        return any(L.bands > 3 for L in self.raw + self.layers)
+        return any(L.is_cube for L in self.raw + self.layers)
 
     # ------------------------------------------------------------------ jobs
     def job_started(self, job_id: int, kind: str, title: str) -> None:
@@ -607,7 +607,7 @@ class RegistrationSession:
         # a camera named after its modality does not say it twice ("hyperspectral (hyperspectral,
         # 100 bands, 640x576)" was cut off at the edge of a side-by-side view)
         parts = [p for p in (None if what == L.name else what, L.unit or None,
-                             f"{L.bands} bands" if L.bands > 3 else None, f"{w}x{h}") if p]
+                             f"{L.bands} bands" if L.is_cube else None, f"{w}x{h}") if p]
         return f"{L.name}  ({', '.join(parts)})"
 
     def export_display_options(self) -> dict[str, dict[str, Any]]:
@@ -622,7 +622,7 @@ class RegistrationSession:
                 o["cmap"] = s.cmap
             if s.limits is not None:
                 o["limits"] = tuple(s.limits)
-            if s.bands is not None and L.bands > 3:
+            if s.bands is not None and L.is_cube:
                 o["bands"] = tuple(s.bands)
             elif L.name in self.pca:
                 o["pca"] = self.pca[L.name]  # the export's false colour is the screen's

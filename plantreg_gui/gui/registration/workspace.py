@@ -352,9 +352,15 @@ class RegistrationWorkspace(QWidget):
         w = self.tabs.currentWidget()
         return next(k for k, v in self.views.items() if v is w)
 
+    def _hook(self, name: str, *views: Any) -> None:
+        """Call the optional hook ``name`` of ``views`` (default: every view; see views.py)."""
+        for v in views or tuple(self.views.values()):
+            fn = getattr(v, name, None)
+            if fn is not None:
+                fn()
+
     def prepare_screenshot(self) -> None:
-        if self.current_view() == "3d":
-            self.cloud_view.render_now()
+        self._hook("prepare_screenshot", self.tabs.currentWidget())
 
     def shutdown(self) -> None:
         self.session.pending_target = None
@@ -362,8 +368,7 @@ class RegistrationWorkspace(QWidget):
             w.cancel()
         for w in list(self._workers):
             w.wait(30000)
-        self.mosaic_view.stop()
-        self.cloud_view.close_plotter()
+        self._hook("shutdown")
         if self._demo_tmp is not None:
             self._demo_tmp.cleanup()
             self._demo_tmp = None
@@ -704,8 +709,7 @@ class RegistrationWorkspace(QWidget):
 
     # ------------------------------------------------------------------ interaction
     def _tab_changed(self, _i: int) -> None:
-        if self.tabs.currentWidget() is self.cloud_view:
-            self.cloud_view.show_staged()  # over several event-loop turns: no stall
+        self._hook("on_shown", self.tabs.currentWidget())
 
     # ------------------------------------------------------------------ save the view
     def _ask_save_view(self) -> None:
@@ -724,11 +728,10 @@ class RegistrationWorkspace(QWidget):
         path = Path(path)
         key = self.current_view()
         w = self.views[key]
-        if key == "3d":
-            self.cloud_view.render_now()
-            if self.cloud_view.plotter is None:
-                raise InputError("the 3D view has nothing to show yet; register first", path)
-            rgb = np.ascontiguousarray(np.asarray(self.cloud_view.plotter.screenshot(None, return_img=True))[..., :3])
+        if hasattr(w, "view_rgb"):
+            rgb = w.view_rgb()
+            if rgb is None:
+                raise InputError(f"the {key} view has nothing to show yet; register first", path)
         else:
             from .image_views import rgb8_from_qimage
 
