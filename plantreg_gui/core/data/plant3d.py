@@ -107,15 +107,6 @@ class Plant3DRecording:
     def depth_shape(self) -> tuple[int, int]:
         return self.images["depth"].shape[:2]
 
-    def point_values(self) -> dict[str, np.ndarray]:
-        """Per-point values of the images aligned with the depth map (depth mm, ir), (N,) each."""
-        out = {}
-        for name in ("depth", "ir"):
-            img = self.images.get(name)
-            if img is not None and img.shape[:2] == self.depth_shape:
-                out[name] = img.reshape(-1)[self.point_pixels].astype(np.float32)
-        return out
-
 
 def load_plant(folder: str | Path, plant: str, progress=None) -> Plant3DRecording:
     """Read every image kind of one plant and back-project its depth map (nominal intrinsics).

@@ -54,11 +54,6 @@ def legend(kind: str = "cases", colours: Mapping[int, tuple[int, int, int]] | No
     return [(c, labels[c], colours.get(c)) for c in sorted(labels)]
 
 
-def canonical_modality(modality: str | None) -> str:
-    """The canonical modality name (kept for callers; the registry is :mod:`.modality`)."""
-    return _modality.canonical(modality)
-
-
 # ---------------------------------------------------------------------- statistics
 _MAX_SAMPLES = 1_000_000
 #: values per block of the per-pixel passes (float32: 1 MB, fits a core's cache)

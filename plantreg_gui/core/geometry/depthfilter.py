@@ -63,22 +63,6 @@ from __future__ import annotations
 import numpy as np
 
 
-def _shifted(z: np.ndarray, r: int, centre: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Neighbour differences over a (2r+1)^2 window: ``d`` (K, H, W) float32 with
-    ``d[k] = z[v + dv[k], u + du[k]] - centre[v, u]`` (``centre`` defaults to ``z``; NaN outside
-    the image or where none), and the offsets ``du``, ``dv`` (K,) float32. Contiguous planes:
-    fast elementwise work."""
-    H, W = z.shape
-    centre = z if centre is None else centre
-    zp = np.pad(z, r, mode="constant", constant_values=np.nan)
-    dv, du = np.mgrid[-r:r + 1, -r:r + 1]
-    du, dv = du.ravel(), dv.ravel()
-    d = np.empty((len(du), H, W), dtype=np.float32)
-    for k in range(len(du)):
-        np.subtract(zp[r + dv[k]:r + dv[k] + H, r + du[k]:r + du[k] + W], centre, out=d[k])
-    return d, du.astype(np.float32), dv.astype(np.float32)
-
-
 def flying_pixels(depth_m: np.ndarray, jump_rel: float = 0.01, radius: int = 2,
                   max_support: int = 2) -> np.ndarray:
     """Flying (mixed, floating) pixels of a ToF depth map; see the module docstring.

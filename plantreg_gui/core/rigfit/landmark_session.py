@@ -358,11 +358,6 @@ class LandmarkSession:
         self.events.points.emit()
         self.events.selection.emit()
 
-    def set_note(self, index: int, note: str) -> None:
-        self._push()
-        self.points[index].note = note
-        self.events.points.emit()
-
     # ------------------------------------------------------------------ residuals
     def _recording_landmarks(self, keys: list[str] | None = None) -> list[RecordingLandmarks]:
         keys = keys if keys is not None else [k for k, v in self.landmarks.recordings.items() if v]

@@ -72,10 +72,6 @@ class SessionEvents:
         for n in self.NAMES:
             setattr(self, n, Event(n))
 
-    def disconnect_all(self) -> None:
-        for n in self.NAMES:
-            getattr(self, n).disconnect()
-
 
 # ---------------------------------------------------------------------- jobs (run on workers)
 def render_layers(layers: list[Layer], settings: dict[str, DisplaySettings], progress,

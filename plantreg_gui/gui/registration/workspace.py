@@ -17,7 +17,6 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable
 
-import numpy as np
 from PySide6.QtCore import QEvent, QSettings, Qt, Signal
 from PySide6.QtGui import QKeySequence
 from PySide6.QtWidgets import (
@@ -776,5 +775,3 @@ class RegistrationWorkspace(QWidget):
         if mode is not None:
             self.set_view("side-by-side")
 
-    def _display_changed(self, name: str, settings: DisplaySettings) -> None:
-        self.session.set_display(name, settings)
