@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QPointF, Qt
 
-from plantreg_gui.core.rigfit.landmark_session import LandmarkSession
+from plantreg_gui.models.landmarks import LandmarkSession
 from plantreg_gui.core.data.landmarks import LandmarkSet
 from plantreg_gui.core.data.recording import Recording
 from plantreg_gui.core.camera.rig import Rig
@@ -289,7 +289,7 @@ def test_report_heading_says_whether_the_opened_rig_was_fitted(qtbot, page, demo
     """The report pane's heading: the shipped Plant3DImageReg rig was fitted by ``plantreg
     fit-rig`` (its file says so) and must not be called "not fitted yet"; after a nudge it is no
     longer the rig as opened (before, both read "as opened (not fitted yet)")."""
-    from plantreg_gui.core.rigfit.landmark_session import LandmarkSession
+    from plantreg_gui.models.landmarks import LandmarkSession
     from plantreg_gui.gui.landmarks.page import LandmarkPage
 
     rig, rec, scene = demo

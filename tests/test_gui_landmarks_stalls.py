@@ -189,7 +189,7 @@ def test_session_load_reads_every_recording_and_is_cancellable(demo_dir, tmp_pat
     """The worker's routine (Qt-free): every recording and its depth map read on return (nothing
     left for the GUI thread to read later), a cancel honoured between the reads."""
     from plantreg_gui.core.errors import Cancelled, InputError
-    from plantreg_gui.core.rigfit.landmark_session import LandmarkSession
+    from plantreg_gui.models.landmarks import LandmarkSession
     from plantreg_gui.core.progress import CancelToken, Reporter
 
     msgs = []

@@ -290,7 +290,7 @@ def test_cube_as_names_what_a_three_band_cube_is_drawn_as(qtbot):
     """A 3-band hyperspectral image (a camera's 8-bit render) is drawn as RGB, so the default of
     "Cube as" says so; a many-band cube's default stays the PCA false colour."""
     from plantreg_gui.gui.registration.display_controls import DisplayControls
-    from plantreg_gui.gui.registration.model import Layer
+    from plantreg_gui.models.layers import Layer
 
     c = DisplayControls()
     qtbot.addWidget(c)

@@ -148,7 +148,7 @@ def test_linked_cursor_and_readout_in_units(ws):
 
 def test_display_controls_recolour_every_view(ws, qapp):
     from plantreg_gui.core.display import display
-    from plantreg_gui.gui.registration.model import DisplaySettings
+    from plantreg_gui.models.layers import DisplaySettings
 
     r = ws.result
     ws.controls.apply("thermal", DisplaySettings(cmap="gray", percentiles=(5.0, 95.0)))
@@ -473,7 +473,7 @@ def test_load_demo_writes_opens_and_registers(qapp, demo_dir, monkeypatch):
     """``--demo``: the demo is written on a worker (here copied from the session's demo to save
     time), opened, and registered into the requested target; busy until all of it is done."""
     import plantreg_gui.core.synthetic as synthetic
-    import plantreg_gui.gui.registration.session as session_module
+    import plantreg_gui.models.registration as session_module
     from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
 
     calls = []

@@ -1,4 +1,4 @@
-"""The landmark page's Qt-free model (core/rigfit/landmark_session.py) against synthetic truth.
+"""The landmark page's Qt-free model (models/landmarks.py) against synthetic truth.
 
 Landmarks are what a careful user clicks on the demo plant (core/synthetic/landmarks.py): the
 TRUE surface point projected by the TRUE rig. The start rig is the true one perturbed. A fitted
@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from plantreg_gui.core.rigfit.landmark_session import LandmarkSession
+from plantreg_gui.models.landmarks import LandmarkSession
 from plantreg_gui.core.data.landmarks import LandmarkSet
 from plantreg_gui.core.data.recording import Recording
 from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, evaluate_landmarks

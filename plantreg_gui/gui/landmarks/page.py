@@ -1,4 +1,4 @@
-"""The landmark page: a view of :class:`~plantreg_gui.core.rigfit.landmark_session.LandmarkSession`.
+"""The landmark page: a view of :class:`~plantreg_gui.models.landmarks.LandmarkSession`.
 
 Left: the depth camera's image (infrared), right: the chosen camera, third: the chosen camera
 registered into the infrared by the current rig (blend / checkerboard / flicker). Click a point
@@ -9,7 +9,7 @@ save. All state and computation are in the session; this widget only shows it an
 the user's actions.
 
 Length: the page's layout, its three image panes and their click handling; the state is in the
-Qt-free :class:`~plantreg_gui.core.rigfit.landmark_session.LandmarkSession`.
+Qt-free :class:`~plantreg_gui.models.landmarks.LandmarkSession`.
 """
 
 from __future__ import annotations
@@ -28,11 +28,11 @@ from PySide6.QtWidgets import (
 from ...core.camera import modality
 from ...core.display.display import blend, checkerboard, default_tile, to_rgb8
 from ...core.errors import PlantregError
-from ...core.rigfit.landmark_session import LandmarkSession, OverlayImages
+from ...models.landmarks import LandmarkSession, OverlayImages
 from ...core.progress import Reporter
 from ..workers import Worker, show_error
 from ..registration.image_views import ColourBar
-from ..registration.model import DEPTH, DisplaySettings, Layer, colour_bar_of, raw_layers
+from ...models.layers import DEPTH, DisplaySettings, Layer, colour_bar_of, raw_layers
 from .point_view import Marker, PointView
 
 #: keys of the nudge panel: key -> (kind, camera axis, sign). Rotations about the camera's own

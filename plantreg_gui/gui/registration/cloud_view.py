@@ -15,7 +15,7 @@ from PySide6.QtWidgets import (
 )
 
 from ..plotter3d import Stages, first_frame_held, make_plotter, release_first_frame, repaint
-from .model import Cloud
+from ...models.layers import Cloud
 
 MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
 

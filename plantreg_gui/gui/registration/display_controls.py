@@ -15,7 +15,7 @@ import numpy as np
 
 from ...core.display import display
 from ...core.camera import modality
-from .model import COLORMAPS, DisplaySettings, Layer
+from ...models.layers import COLORMAPS, DisplaySettings, Layer
 
 
 class BandSpinBox(QSpinBox):

@@ -15,7 +15,7 @@ from PySide6.QtWidgets import (
 from ...core.display import display
 from ...core.registration.cases import AREA_NAMES, CASE_NAMES
 from .image_views import ImageView
-from .model import case_table
+from ...models.layers import case_table
 
 
 #: overlay colours of the other masks: red mixed edge pixels, blue flying pixels

@@ -196,7 +196,7 @@ class MosaicView(QWidget):
     def bind(self, session) -> "MosaicView":
         """Show ``session``'s registered renderings; hovering moves its cursor."""
         from .image_views import home_rect
-        from .model import DEPTH
+        from ...models.layers import DEPTH
 
         def refresh() -> None:
             cams = [L.name for L in session.layers if L.name != DEPTH]

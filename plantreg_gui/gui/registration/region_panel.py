@@ -14,7 +14,7 @@ from PySide6.QtWidgets import (
 )
 
 from .image_views import SpectrumPlot
-from .model import format_value
+from ...models.layers import format_value
 
 
 class RegionPanel(QGroupBox):

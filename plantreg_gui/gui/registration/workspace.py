@@ -29,14 +29,15 @@ from ...core.data import plant3d
 from ...core.errors import InputError, PlantregError
 from ...core.data.recording import MANIFEST
 from ...core.camera.rig import Rig
+from ...models.layers import DisplaySettings
+from ...models.registration import (RegistrationSession, check_is_rig_file, demo_job, kind_of_path, load_job,
+                                   plant3d_job, register_job)
 from ..workers import Worker, show_error
 from .display_controls import DisplayControls
 from .export_dialog import ExportDialog, folder_is_nonempty
 from .image_views import SpectrumPlot
-from .model import DisplaySettings
 from .params_panel import ParamsPanel
 from .region_panel import RegionPanel
-from .session import RegistrationSession, demo_job, load_job, plant3d_job, register_job
 from .views import VIEWS, view_key
 
 RECENT_KEY = "workspace/recent"
@@ -73,21 +74,6 @@ class _EmptyNote(QLabel):
             self.raise_()
 
 
-def _check_is_rig_file(path: Path) -> None:
-    """Refuse a JSON file that is plainly something else (a recording manifest, a session, any JSON)
-    with "not a rig file" rather than a complaint about its missing cameras."""
-    if not path.is_file():
-        return  # Rig.load names the missing file
-    try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
-        return  # Rig.load explains unreadable files
-    if isinstance(d, dict) and "cameras" not in d and d.get("format") != "plantreg.rig":
-        what = "a recording manifest" if path.name == MANIFEST else "a JSON file without \"cameras\""
-        raise InputError(f"not a rig file ({what}); a rig file lists the cameras with their intrinsics and "
-                         "extrinsics", path)
-
-
 # ---------------------------------------------------------------------- the widget
 class RegistrationWorkspace(QWidget):
     """See the module docstring. Signals: ``registered(result)`` after each registration,
@@ -96,6 +82,8 @@ class RegistrationWorkspace(QWidget):
     idle = Signal()
     registered = Signal(object)
     exported = Signal(object)
+    #: File > Fit rig from landmarks: (rig path or None, recording folder or None); the window opens the page
+    landmarks_requested = Signal(object, object)
 
     def __init__(self, parent: QWidget | None = None, session: RegistrationSession | None = None):
         super().__init__(parent)
@@ -144,7 +132,8 @@ class RegistrationWorkspace(QWidget):
         self.file_menu.addAction("Open Plant3DImageReg recording…", lambda: self._guard(self._ask_plant3d))
         self.recent_menu = self.file_menu.addMenu("Open recent")
         self.recent_menu.aboutToShow.connect(self._fill_recent)
-        self.file_menu.addAction("Fit rig from landmarks…", lambda: self.window().show_landmarks(self.rig_path, getattr(self.recording, "folder", None)))  # noqa: E501
+        self.file_menu.addAction("Fit rig from landmarks…", lambda: self.landmarks_requested.emit(
+            self.rig_path, getattr(self.recording, "folder", None)))
         self.file_menu.addSeparator()
         self.file_menu.addAction("Load demo", lambda: self._guard(self.load_demo))
         self.export_action = self.file_menu.addAction("Export…", self._ask_export)
@@ -389,7 +378,7 @@ class RegistrationWorkspace(QWidget):
         path = Path(path)
         if path.is_dir():
             raise InputError("is a folder, not a rig file: choose the rig's .json file", path)
-        _check_is_rig_file(path)
+        check_is_rig_file(path)
         rig = Rig.load(path)
         if self.session.plant is not None:
             # a plant of the data set has no rig of its own: the rig goes with a recording opened next
@@ -491,16 +480,7 @@ class RegistrationWorkspace(QWidget):
             self.export(dlg.out(), dlg.what(), drop_mixed=dlg.drop_mixed())
 
     def default_export_folder(self) -> Path:
-        """Beside the recording; for the demo, in the home folder: the demo lives in a temporary
-        folder that is deleted when the window closes, and an export in it would go with it."""
-        s = self.session
-        target = s.result.target if s.result is not None else "target"
-        rec = s.recording_path
-        if rec is None:
-            return Path.home()
-        if s.is_demo:
-            return Path.home() / f"plantreg-demo-registered-{target}"
-        return rec.parent / f"registered-{target}"
+        return self.session.default_export_folder()
 
     def export(self, out: str | Path, what: list[str] | None = None, overwrite: bool = False,
                drop_mixed: bool = False) -> bool:
@@ -687,24 +667,21 @@ class RegistrationWorkspace(QWidget):
         e.acceptProposedAction()
 
     def open_path(self, path: str | Path) -> None:
-        """Open whatever a dropped path is: a rig file, a recording folder, a demo folder
-        (rig.json + recording/), or the Plant3DImageReg data set."""
+        """Open whatever a dropped path is (the session's :func:`kind_of_path` says what)."""
         p = Path(path)
-        if p.is_file() and p.suffix.lower() == ".json":
-            if p.name == MANIFEST:
-                self.open_recording(p.parent)
-            else:
-                self.open_rig(p)
-        elif p.is_dir() and plant3d.is_dataset(p):
+        kind = kind_of_path(p)
+        if kind == "rig":
+            self.open_rig(p)
+        elif kind == "manifest":
+            self.open_recording(p.parent)
+        elif kind == "dataset":
             self._ask_plant3d(p)
-        elif p.is_dir() and (p / MANIFEST).is_file():
+        elif kind == "recording":
             self.open_recording(p)
-        elif p.is_dir() and (p / "rig.json").is_file() and (p / "recording" / MANIFEST).is_file():
+        else:  # a demo folder: rig.json + recording/
             self.session.rig = None
             self.open_rig(p / "rig.json")
             self.open_recording(p / "recording")
-        else:
-            raise InputError("not a rig file, a recording folder or the Plant3DImageReg data set", p)
 
     # ------------------------------------------------------------------ interaction
     def _tab_changed(self, _i: int) -> None:

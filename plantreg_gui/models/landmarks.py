@@ -16,7 +16,7 @@ copies (safe on a worker thread) and an ``apply_*`` that updates the session on 
 thread -- napari's snapshot / compute / apply.
 
 Length: the landmark page's whole model (pairs, fits, leave-one-out, nudges, refinement) in one
-Qt-free class with its events; the computations it calls live in :mod:`.rigfit` and :mod:`.refine`.
+Qt-free class with its events; the computations it calls live in :mod:`plantreg_gui.core.rigfit`.
 """
 
 from __future__ import annotations
@@ -30,39 +30,17 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
-from ..errors import InputError
-from ..data.landmarks import Landmark, LandmarkSet
-from ..progress import Reporter, ensure_reporter
-from ..data.recording import Recording
-from ..camera.rig import Rig
-from .rigfit import FitResult, RecordingLandmarks, evaluate_landmarks, fit_rig
+from ..core.errors import InputError
+from ..core.data.landmarks import Landmark, LandmarkSet
+from ..core.progress import Reporter, ensure_reporter
+from ..core.data.recording import Recording
+from ..core.camera.rig import Rig
+from ..core.rigfit.rigfit import FitResult, RecordingLandmarks, evaluate_landmarks, fit_rig
+from .events import Events
 
 
-class _Event:
-    """A list of callbacks (``connect`` / ``disconnect`` / call ``emit()``)."""
-
-    def __init__(self) -> None:
-        self._callbacks: list[Callable[[], Any]] = []
-
-    def connect(self, cb: Callable[[], Any]) -> Callable[[], Any]:
-        self._callbacks.append(cb)
-        return cb
-
-    def disconnect(self, cb: Callable[[], Any]) -> None:
-        if cb in self._callbacks:
-            self._callbacks.remove(cb)
-
-    def emit(self) -> None:
-        for cb in list(self._callbacks):
-            cb()
-
-
-class Events:
-    def __init__(self) -> None:
-        self.points = _Event()
-        self.rig = _Event()
-        self.selection = _Event()
-        self.report = _Event()
+class LandmarkEvents(Events):
+    NAMES = ("points", "rig", "selection", "report")
 
 
 @dataclass
@@ -89,7 +67,7 @@ class LandmarkSession:
 
     def __init__(self, rig: Rig, landmarks: LandmarkSet | None = None,
                  recordings: dict[str, Recording] | None = None) -> None:
-        self.events = Events()
+        self.events = LandmarkEvents()
         self.rig = rig
         self.landmarks = landmarks if landmarks is not None else LandmarkSet(base=Path.cwd())
         self._recordings: dict[str, Recording] = dict(recordings or {})
@@ -374,14 +352,14 @@ class LandmarkSession:
 
     def summary(self) -> dict[str, dict[str, Any]]:
         """Per camera over every recording: ``n``, ``median_px``, ``p90_px``, ``max_px`` of the current rig."""
-        from .rigfit import _stats_by
+        from ..core.rigfit.rigfit import _stats_by
 
         rows, _ = evaluate_landmarks(self.rig, self._recording_landmarks())
         return _stats_by(rows, ("camera",)) if rows else {}
 
     def predicted(self, index: int, camera: str | None = None) -> np.ndarray | None:
         """Where the current rig puts point ``index``'s depth pixel in ``camera`` (2,), or None."""
-        from .rigfit import landmark_depth
+        from ..core.rigfit.rigfit import landmark_depth
 
         camera = camera or self.camera
         lm = self.points[index]
@@ -478,7 +456,7 @@ class LandmarkSession:
         fn = self.refine_fn
         if fn is None:
             try:
-                from .refine import refine_rig as fn
+                from ..core.rigfit.refine import refine_rig as fn
             except ImportError:
                 raise InputError("automatic refinement is not available in this plantreg (no core.refine)") from None
         rig = Rig.from_dict(self.rig.to_dict())
@@ -489,7 +467,7 @@ class LandmarkSession:
 
         def job(progress: Reporter | None = None) -> Any:
             if in_process:
-                from ..jobs.procs import call_in_process
+                from ..core.jobs.procs import call_in_process
 
                 return call_in_process(fn, rig, recs, cameras=cameras, free=free, landmarks=lms,
                                        progress=progress, **kw)
@@ -501,8 +479,8 @@ class LandmarkSession:
     def overlay_job(self) -> Callable[..., OverlayImages]:
         """A routine ``(progress=Reporter) -> OverlayImages``: the chosen camera registered into
         the depth camera's pixel grid by the current rig (core/registration/register.py), both as RGB8."""
-        from ..display.display import to_rgb8
-        from ..registration.register import Registrar
+        from ..core.display.display import to_rgb8
+        from ..core.registration.register import Registrar
 
         rig = Rig.from_dict(self.rig.to_dict())
         key, camera = self.recording_key, self.camera

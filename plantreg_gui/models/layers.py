@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from ...core.display import display
-from ...core.camera import modality as _mod
-from ...core.geometry.depth import to_millimetres
+from ..core.display import display
+from ..core.camera import modality as _mod
+from ..core.geometry.depth import to_millimetres
 
 DEPTH = "depth"  # pseudo-modality: z of the hit point (registered) or the raw depth map
 

@@ -3,7 +3,7 @@
 :class:`RegistrationSession` holds the rig, the recording (or a Plant3DImageReg plant), the
 registrar and its result, the displayable layers and their renderings, the display settings per
 modality, the masks source and the cursor. Every mutation goes through a method that emits an
-:class:`Event`; the Qt views subscribe to those events and hold no state of their own (napari's
+:class:`~.events.Event`; the Qt views subscribe to those events and hold no state of their own (napari's
 ``ViewerModel``). The long steps are plain functions (``*_job``) that a worker thread runs and
 whose result the session applies on the GUI thread; tests drive the session without Qt.
 
@@ -30,47 +30,57 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ...core.camera import modality
-from ...core.registration.cases import Case, area_label, case_label
-from ...core.geometry.depth import to_millimetres
-from ...core.errors import InputError
-from ...core.data.recording import Recording
-from ...core.camera.rig import Rig
-from .model import (
+from ..core.camera import modality
+from ..core.registration.cases import Case, area_label, case_label
+from ..core.geometry.depth import to_millimetres
+from ..core.errors import InputError
+from ..core.data.recording import MANIFEST, Recording
+from ..core.camera.rig import Rig
+from .events import Event, Events  # noqa: F401 (Event: what the views subscribe to)
+from .layers import (
     DEPTH, Cloud, DisplaySettings, Layer, build_cloud, colour_bar_of, pca_basis, raw_layers, registered_layers,
     render,
 )
 
 
+# ---------------------------------------------------------------------- paths
+def check_is_rig_file(path: Path) -> None:
+    """Refuse a JSON file that is plainly something else (a recording manifest, a session, any JSON)
+    with "not a rig file" rather than a complaint about its missing cameras."""
+    import json
+
+    if not path.is_file():
+        return  # Rig.load names the missing file
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return  # Rig.load explains unreadable files
+    if isinstance(d, dict) and "cameras" not in d and d.get("format") != "plantreg.rig":
+        what = "a recording manifest" if path.name == MANIFEST else "a JSON file without \"cameras\""
+        raise InputError(f"not a rig file ({what}); a rig file lists the cameras with their intrinsics and "
+                         "extrinsics", path)
+
+
+def kind_of_path(p: Path) -> str:
+    """What a dropped or given path is: ``"rig"`` (a JSON file), ``"manifest"`` (a recording.json),
+    ``"dataset"`` (the Plant3DImageReg data set), ``"recording"`` (a recording folder) or
+    ``"demo"`` (a folder with rig.json and recording/); :class:`InputError` for anything else."""
+    from ..core.data import plant3d
+
+    if p.is_file() and p.suffix.lower() == ".json":
+        return "manifest" if p.name == MANIFEST else "rig"
+    if p.is_dir() and plant3d.is_dataset(p):
+        return "dataset"
+    if p.is_dir() and (p / MANIFEST).is_file():
+        return "recording"
+    if p.is_dir() and (p / "rig.json").is_file() and (p / "recording" / MANIFEST).is_file():
+        return "demo"
+    raise InputError("not a rig file, a recording folder or the Plant3DImageReg data set", p)
+
+
 # ---------------------------------------------------------------------- events
-class Event:
-    """A minimal evented signal: ``connect(callback)``, ``disconnect(callback)``, ``emit(*args)``."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-        self._callbacks: list[Callable[..., Any]] = []
-
-    def connect(self, callback: Callable[..., Any]) -> Callable[..., Any]:
-        self._callbacks.append(callback)
-        return callback
-
-    def disconnect(self, callback: Callable[..., Any] | None = None) -> None:
-        if callback is None:
-            self._callbacks.clear()
-        elif callback in self._callbacks:
-            self._callbacks.remove(callback)
-
-    def emit(self, *args: Any) -> None:
-        for cb in list(self._callbacks):
-            cb(*args)
-
-
-class SessionEvents:
+class SessionEvents(Events):
     NAMES = ("source", "raw", "result", "display", "cursor", "masks_source", "busy", "region")
-
-    def __init__(self) -> None:
-        for n in self.NAMES:
-            setattr(self, n, Event(n))
 
 
 # ---------------------------------------------------------------------- jobs (run on workers)
@@ -115,8 +125,8 @@ DEMO_IN_PROCESS = True
 
 
 def demo_job(folder: Path, settings, progress) -> dict:
-    from ...core import synthetic
-    from ...core.jobs.procs import call_in_process
+    from ..core import synthetic
+    from ..core.jobs.procs import call_in_process
 
     progress(0.0, "writing the demo rig and recording")
     # the calibration session is the wizard's business; leaving it out halves the start-up
@@ -133,7 +143,7 @@ def register_job(registrar, rig: Rig, rec: Recording, target: str, settings, pro
     """Register (reusing ``registrar``'s meshes), render the layers and build the point cloud.
     ``params`` (RegistrationParams) for a new registrar (the pipeline's :func:`register`, as the
     command line's)."""
-    from ...core.pipeline.pipeline import register
+    from ..core.pipeline.pipeline import register
 
     registrar, result = register(rig, rec, target, params, progress.sub(0.0, 0.85), registrar=registrar)
     layers = registered_layers(result, rig)
@@ -156,7 +166,7 @@ def register_job(registrar, rig: Rig, rec: Recording, target: str, settings, pro
 
 
 def plant3d_job(folder: Path, plant: str, settings, progress) -> dict:
-    from ...core.data import plant3d
+    from ..core.data import plant3d
 
     p = plant3d.load_plant(folder, plant, progress.sub(0.0, 0.5))
     layers = []
@@ -175,7 +185,7 @@ def plant3d_job(folder: Path, plant: str, settings, progress) -> dict:
 
 def mask_of(shape: tuple[int, int], region: tuple[str, Any]) -> np.ndarray:
     """(H, W) bool of a session region (("rect", (x0, y0, x1, y1)) or ("polygon", [(x, y), ...]))."""
-    from ...core.registration.region import region_mask
+    from ..core.registration.region import region_mask
 
     kind, geom = region
     return region_mask(shape, **({"rect": geom} if kind == "rect" else {"polygon": geom}))
@@ -185,8 +195,8 @@ def region_job(result: Any, region: tuple[str, Any], sources: list[str],
                info: dict[str, tuple[Any, str]], progress=None) -> list:
     """core.region statistics of ``sources`` over ``region`` of ``result``; ``info[source]`` =
     (wavelengths or None, unit). Returns the RegionStats in ``sources`` order."""
-    from ...core.progress import ensure_reporter
-    from ...core.registration.region import region_stats
+    from ..core.progress import ensure_reporter
+    from ..core.registration.region import region_stats
 
     rep = ensure_reporter(progress)
     mask = mask_of(result.shape, region)
@@ -200,7 +210,7 @@ def region_job(result: Any, region: tuple[str, Any], sources: list[str],
 
 def region_csv(result: Any, region: tuple[str, Any], sources: list[str], info: dict[str, tuple[Any, str]],
                progress=None) -> str:
-    from ...core.registration.region import stats_csv
+    from ..core.registration.region import stats_csv
 
     kind, geom = region
     desc = (f"rect x {min(geom[0], geom[2]):.1f}-{max(geom[0], geom[2]):.1f} "
@@ -294,7 +304,7 @@ class RegistrationSession:
 
     def __post_init__(self) -> None:
         if self.params is None:
-            from ...core.registration.params import RegistrationParams
+            from ..core.registration.params import RegistrationParams
 
             self.params = RegistrationParams()
 
@@ -305,6 +315,16 @@ class RegistrationSession:
             self.registrar = None
 
     # ------------------------------------------------------------------ queries
+    def default_export_folder(self) -> Path:
+        """Beside the recording; for the demo, in the home folder: the demo lives in a temporary
+        folder that is deleted when the window closes, and an export in it would go with it."""
+        target = self.result.target if self.result is not None else "target"
+        if self.recording_path is None:
+            return Path.home()
+        if self.is_demo:
+            return Path.home() / f"plantreg-demo-registered-{target}"
+        return self.recording_path.parent / f"registered-{target}"
+
     def settings_for(self, name: str) -> DisplaySettings:
         return self.display.get(name, DisplaySettings())
 
