@@ -67,7 +67,7 @@ def page(qtbot, demo, tmp_path):
 
 
 def test_click_pairs_fit_overlay_nudge_save(qtbot, page, demo, tmp_path):
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     rig, rec, scene = demo
     s = page.session

@@ -56,7 +56,7 @@ def _spy(monkeypatch, owner, name, on_gui_thread: list, delay_s: float = 0.0) ->
 
 def test_open_reads_the_recordings_on_a_worker(qtbot, page, demo_dir, tmp_path, monkeypatch):
     import plantreg_gui.gui.landmarks.page as page_module
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     reads, conversions = [], []
     _spy(monkeypatch, Recording, "load", reads)

@@ -170,7 +170,7 @@ def test_registration_keeps_the_gui_thread_responsive(registered_workspace, qtbo
     on an overloaded 2-core machine the GUI thread waits for a CPU, not for our code (measured: a
     load of 14 per core stretches 0.2 s to ~2 s). The freezes this guards against took 1-12 s
     on an idle machine."""
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     w = registered_workspace
     load = os.getloadavg()[0] / (os.cpu_count() or 1)

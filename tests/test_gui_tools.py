@@ -364,7 +364,7 @@ def test_region_statistics_keep_the_gui_thread_responsive(registered_workspace, 
     core when above 1 (the GUI thread then waits for a CPU, not for our code)."""
     import os
 
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     ws = registered_workspace
     s = ws.session
@@ -389,7 +389,7 @@ def test_first_show_of_the_3d_tab_is_staged_and_complete(registered_workspace, q
     per core when above 1. (Before: one 265-374 ms gap on the idle machine.)"""
     import os
 
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     ws = registered_workspace
     s = ws.session
@@ -443,7 +443,7 @@ def test_wizard_frusta_view_is_drawn_in_stages(qapp, qtbot, no_qt_leaks):
 
     from plantreg_gui.core.synthetic.demo import demo_rig
     from plantreg_gui.gui.calibration.frusta_view import FrustaView
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     rig = demo_rig()
     rng = np.random.default_rng(1)

@@ -37,9 +37,10 @@ def _wait(qapp, pred, timeout: float = 120.0) -> None:
         time.sleep(0.005)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def ws(qapp, demo_dir, tmp_path_factory):
-    """A shown workspace with the demo opened and registered into ``ir``."""
+    """A shown workspace with the demo opened and registered into ``ir`` (a new one per test:
+    what one test changes never reaches the next)."""
     from PySide6.QtCore import QSettings
 
     from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
@@ -55,15 +56,8 @@ def ws(qapp, demo_dir, tmp_path_factory):
     _wait(qapp, lambda: not w.is_busy())
     w.raw_shown = {n: tv.view.displayed() for n, tv in w.raw_grid.views.items()}  # before any registration
     w.raw_result = w.result
-    from plantreg_gui.gui.stall_probe import StallProbe
-
-    probe = StallProbe()
-    probe.start()
-    t0 = time.perf_counter()
     w.run_registration("ir")
     _wait(qapp, lambda: w.result is not None and not w.is_busy())
-    probe.stop()
-    w.probe, w.register_seconds = probe, time.perf_counter() - t0
     yield w
     w.shutdown()
     w.close()
@@ -87,20 +81,6 @@ def test_raw_images_shown_before_registration(ws, demo_dir):
     d_mm = rec.depth.astype(np.float32) * np.float32(rig.depth_scale * 1000)
     d_mm[~(d_mm > 0)] = np.nan
     np.testing.assert_array_equal(ws.raw_shown["depth"], display.to_rgb8(d_mm, modality="depth"))
-
-
-def test_gui_thread_responsive_during_registration(ws):
-    # the registration of the demo takes seconds; the GUI thread must keep ticking
-    assert ws.register_seconds > 0.3, "registration too short to measure latency"
-    assert ws.probe.ticks >= 0.3 * ws.register_seconds / 0.02
-    # 200 ms on an idle machine, in proportion to the load per core: on an overloaded 2-core
-    # machine the GUI thread waits for a CPU (see test_gui_session.py for the same tolerance)
-    import os
-
-    limit = 0.2 * max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1))
-    print(f"registration {ws.register_seconds:.2f} s, max event-loop gap {ws.probe.max_gap * 1000:.0f} ms "
-          f"(limit {limit * 1000:.0f} ms)")
-    assert ws.probe.max_gap < limit
 
 
 def test_side_by_side_shows_display_rendering_of_registered_arrays(ws):

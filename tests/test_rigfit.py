@@ -266,15 +266,16 @@ def test_free_items_are_checked(true_rig):
 
 
 # ---------------------------------------------------------------------------- speed, nominal cameras
-def test_fit_of_100_landmarks_takes_under_a_second(true_rig):
-    """~100 landmarks (2 x 50, three cameras each), focal free, without leave-one-out.
-    Measured ~0.3-0.5 s on 2 shared cores; asserted with a 3x tolerance for a loaded machine."""
+def test_fit_of_100_landmarks_recovers_the_rig(true_rig):
+    """~100 landmarks (2 x 50, three cameras each), focal free, without leave-one-out: the fit
+    lands on the true poses (its speed is a benchmark's business: benchmarks/bench_rigfit_seeds.py)."""
     rng = np.random.default_rng(16)
     recs = landmark_recordings(true_rig, (31, 32), rng, n=50)
     start = perturb_rig(true_rig, rng)
     res = fit_rig(start, recs, free=FREE_FOCAL, loo=False)
-    print("fit time", res.report["time_s"])
-    assert res.report["time_s"] < 3.0
+    for cam in ("rgb", "thermal", "hyperspectral"):
+        fitted, true = res.rig.camera(cam), true_rig.camera(cam)
+        assert np.linalg.norm(fitted.center_rig - true.center_rig) < 0.01, cam  # metres
 
 
 def test_nominal_camera_from_a_datasheet():

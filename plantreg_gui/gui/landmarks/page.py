@@ -30,7 +30,7 @@ from ...core.display.display import blend, checkerboard, default_tile, to_rgb8
 from ...core.errors import PlantregError
 from ...models.landmarks import LandmarkSession, OverlayImages
 from ...core.progress import Reporter
-from ..workers import Worker, show_error
+from ..workers import Jobs, Worker, show_error
 from ..registration.image_views import ColourBar
 from ...models.layers import DEPTH, DisplaySettings, Layer, colour_bar_of, raw_layers
 from .point_view import Marker, PointView
@@ -87,7 +87,10 @@ class LandmarkPage(QWidget):
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.session: LandmarkSession | None = None
-        self._workers: set[Worker] = set()
+        self._workers = Jobs(self, on_progress=lambda t, f, m: (self.progress.setValue(int(1000 * f)),
+                                                                 self.hint.setText(m)),
+                             on_cancelled=lambda t: self.hint.setText(f"{t} cancelled."),
+                             on_end=lambda w: (self._sync_enabled(), self.progress.setValue(0)))
         self._fit_worker: Worker | None = None
         self._refine_worker: Worker | None = None
         self._overlay_worker: Worker | None = None
@@ -586,13 +589,7 @@ class LandmarkPage(QWidget):
         return frozenset(items)
 
     def _start(self, w: Worker, on_done, label: str, title: str | None = None) -> Worker:
-        self._workers.add(w)
-        w.progress.connect(lambda f, m: (self.progress.setValue(int(1000 * f)), self.hint.setText(m)))
-        w.finished.connect(on_done)
-        w.failed.connect(lambda msg, det: show_error(self, title or label, msg, det))
-        w.cancelled.connect(lambda: self.hint.setText(f"{label} cancelled."))
-        w.done.connect(lambda: (self._workers.discard(w), self._sync_enabled(), self.progress.setValue(0)))
-        w.start()
+        self._workers.start(w, label, on_done, error_title=title or label)
         self._sync_enabled()
         return w
 
@@ -652,11 +649,9 @@ class LandmarkPage(QWidget):
             return
         w = Worker(job)
         self._overlay_worker = w
-        self._workers.add(w)
-        w.finished.connect(self._overlay_finished)
-        w.failed.connect(lambda msg, det: self.overlay_label.setText(f"overlay failed: {msg}"))
-        w.done.connect(lambda: (self._workers.discard(w), self._overlay_again()))
-        w.start()
+        self._workers.start(w, "Overlay", self._overlay_finished, background=True,
+                            on_failed=lambda msg, det: self.overlay_label.setText(f"overlay failed: {msg}"),
+                            on_end=lambda w: self._overlay_again())
 
     def _overlay_again(self) -> None:
         if self._overlay_dirty:

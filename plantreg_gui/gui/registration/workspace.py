@@ -32,7 +32,7 @@ from ...core.camera.rig import Rig
 from ...models.layers import DisplaySettings
 from ...models.registration import (RegistrationSession, check_is_rig_file, demo_job, kind_of_path, load_job,
                                    plant3d_job, register_job)
-from ..workers import Worker, show_error
+from ..workers import Jobs, Worker, show_error
 from .display_controls import DisplayControls
 from .export_dialog import ExportDialog, folder_is_nonempty
 from .image_views import SpectrumPlot
@@ -90,7 +90,9 @@ class RegistrationWorkspace(QWidget):
         self.setAcceptDrops(True)
         self.session = session or RegistrationSession()
         self.last_export: Path | None = None
-        self._workers: list[Worker] = []
+        self._workers = Jobs(self, on_progress=self._progress,
+                             on_cancelled=lambda t: self.readout.setText(f"{t}: cancelled."),
+                             on_end=self._worker_done)
         self._view_chosen = False
         self._demo_tmp: tempfile.TemporaryDirectory | None = None
         self._build_ui()
@@ -352,10 +354,7 @@ class RegistrationWorkspace(QWidget):
 
     def shutdown(self) -> None:
         self.session.pending_target = None
-        for w in list(self._workers):
-            w.cancel()
-        for w in list(self._workers):
-            w.wait(30000)
+        self._workers.wait_all(30000)
         self._hook("shutdown")
         if self._demo_tmp is not None:
             self._demo_tmp.cleanup()
@@ -467,8 +466,7 @@ class RegistrationWorkspace(QWidget):
 
     def cancel(self) -> None:
         self.session.pending_target = None
-        for w in self._workers:
-            w.cancel()
+        self._workers.cancel_all()
 
     # ------------------------------------------------------------------ export
     def _ask_export(self) -> None:
@@ -518,18 +516,12 @@ class RegistrationWorkspace(QWidget):
 
     # ------------------------------------------------------------------ workers
     def _start(self, w: Worker, title: str, on_done: Callable[[Any], None], kind: str = "load") -> None:
-        self._workers.append(w)
-        w.progress.connect(lambda f, m, t=title: self._progress(t, f, m))
-        w.finished.connect(lambda out: self._guard(on_done, out, title="Cannot show the result"))
-        w.failed.connect(lambda msg, det, t=title: show_error(self, t + " failed", msg, det))
-        w.cancelled.connect(lambda t=title: self.readout.setText(f"{t}: cancelled."))
-        w.done.connect(lambda w=w: self._worker_done(w))
         self.progress.setValue(0)
         self._progress(title, 0.0, "")
         self.progress.show()
         self.cancel_button.show()
         self.register_button.setEnabled(False)
-        w.start()
+        self._workers.start(w, title, lambda out: self._guard(on_done, out, title="Cannot show the result"))
         self.session.job_started(id(w), kind, title)
 
     def _progress(self, title: str, fraction: float, message: str) -> None:
@@ -543,8 +535,6 @@ class RegistrationWorkspace(QWidget):
         self.progress.setFormat(msg.replace("%", "%%") + "  %p%")
 
     def _worker_done(self, w: Worker) -> None:
-        if w in self._workers:
-            self._workers.remove(w)
         w.deleteLater()
         s = self.session
         s.job_ended(id(w))

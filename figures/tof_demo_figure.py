@@ -1,6 +1,6 @@
 """Figure of the realistic demo's time-of-flight artefacts and their handling (docs/images/tof_demo.png).
 
-    .venv/bin/python benchmarks/tof_demo_figure.py [--seed 0] [--out docs/images/tof_demo.png]
+    .venv/bin/python figures/tof_demo_figure.py [--seed 0] [--out docs/images/tof_demo.png]
 
 Left: the depth seen from the side (one image row band), as measured (flying pixels red) and
 after the clean-up. Right: the thermal image registered into the infrared view, with the

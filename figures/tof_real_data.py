@@ -1,6 +1,6 @@
 """Flying-pixel filter and denoising on the real Plant3DImageReg depth maps (Azure Kinect, NFOV).
 
-    .venv/bin/python benchmarks/tof_real_data.py [--data ../shared/data/plant3dimagereg]
+    .venv/bin/python figures/tof_real_data.py [--data ../shared/data/plant3dimagereg]
                                                  [--image docs/images/tof_grapevine_before_after.png]
 
 Prints, per plant, the depth pixels detected as flying and how far denoising moved the others,

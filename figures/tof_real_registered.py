@@ -1,7 +1,7 @@
 """Registered real grapevine (Plant3DImageReg) before/after the ToF clean-up: the 3D point cloud
 coloured by thermal (docs/images/tof_grapevine_thermal_cloud.png).
 
-    xvfb-run -a .venv/bin/python benchmarks/tof_real_registered.py [--plant 01grapevine]
+    xvfb-run -a .venv/bin/python figures/tof_real_registered.py [--plant 01grapevine]
 
 Uses the rig fitted by the annotate work (resources/plant3dimagereg/rig.json; its notes say the
 thermal pose is not well determined by its few thermal landmarks). Before: the depth as measured,

@@ -1,6 +1,6 @@
 """Screenshots of the calibration wizard's seven pages for docs/images (one run of the demo).
 
-    PYTHONPATH=. xvfb-run -a .venv/bin/python benchmarks/wizard_screenshots.py [--out docs/images]
+    PYTHONPATH=. xvfb-run -a .venv/bin/python figures/wizard_screenshots.py [--out docs/images]
 
 Renders the demo (``plantreg demo``: calibration session and a plant recording), opens its
 calibration session in the main window (1500 x 950), rejects one RGB view (so pages 3 and 4 show

@@ -1,6 +1,6 @@
 """The issue-9 figures per seed and source on the realistic ToF scene (docs/registration.md section 9 tables).
 
-    PYTHONPATH=. .venv/bin/python benchmarks/tof_figures.py 0,1,2,3,4,5,6,7
+    PYTHONPATH=. .venv/bin/python figures/tof_figures.py 0,1,2,3,4,5,6,7
 
 Per seed and source, one markdown row: median / 90th percentile mapping error, P1 coverage, P1 truly
 visible, occluded -> P2/P3.2 with the clean-up, the same without hole filling, without any clean-up

@@ -1,7 +1,7 @@
 """Screenshot of the workspace's region tool (README / docs/workspace.md): the demo registered
 into ir, a rectangle over the plant, the thermal statistics in the side panel.
 
-    xvfb-run -a python benchmarks/region_tool_screenshot.py OUT.png [--source thermal] [--limits 20 24]
+    xvfb-run -a python figures/region_tool_screenshot.py OUT.png [--source thermal] [--limits 20 24]
 """
 
 from __future__ import annotations
