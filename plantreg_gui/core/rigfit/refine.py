@@ -113,6 +113,16 @@ class RefineParams:
     #: cameras refined at the same time (threads: numpy, OpenCV and Open3D release the GIL in the
     #: cost's heavy calls). The result does not depend on it; 1 = one after the other.
     workers: int = 2
+    # Experiment hooks (None: the method as documented). For evaluating variants of the method
+    # (resources/plant3dimagereg/landmark_scripts/refine_eval.py) without patching this module.
+    #: (image (H, W) float32, sigma px) -> the filtered image both sides are compared in (default: Gaussian blur)
+    image_filter: Callable[[np.ndarray, float], np.ndarray] | None = None
+    #: (level, number of levels, focal free) -> the parameters searched at that level
+    active_params: Callable[[int, int, bool], list[int]] | None = None
+    #: (points X_rig (N, 3), roi (lo, hi), weights (N,)) -> the level's point weights
+    point_weights: Callable[[np.ndarray, tuple[np.ndarray, np.ndarray], np.ndarray], np.ndarray] | None = None
+    #: camera -> a term added to the cost (e.g. a landmark residual)
+    extra_cost: Callable[[Camera], float] | None = None
 
 
 @dataclass
@@ -434,10 +444,13 @@ def _nid_per_recording(lv: _Level, cam: Camera, cell: np.ndarray | None = None) 
     return nid, tot
 
 
-def _cost(lv: _Level, cam: Camera) -> tuple[float, list[float]]:
-    """Weighted mean NID over the recordings, and the NID of each."""
+def _cost(lv: _Level, cam: Camera, p: RefineParams | None = None) -> tuple[float, list[float]]:
+    """Weighted mean NID over the recordings (plus ``p.extra_cost``, if any), and the NID of each."""
     nid, tot = _nid_per_recording(lv, cam)
-    return (float(np.dot(tot, nid) / tot.sum()) if tot.sum() > 0 else 1.0), [float(x) for x in nid]
+    c = float(np.dot(tot, nid) / tot.sum()) if tot.sum() > 0 else 1.0
+    if p is not None and p.extra_cost is not None:
+        c += float(p.extra_cost(cam))
+    return c, [float(x) for x in nid]
 
 
 # ---------------------------------------------------------------------------- parametrisation
@@ -671,7 +684,7 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
             warn.append(f"{name}: no depth point is visible in this camera at the start pose; not refined")
             return {"converged": False, "reason": "no visible depth points"}, cam0, warn
         par = _Param(cam, sig_src, float(np.median(zs)), focal)
-        active = _active_params(li, len(p.levels_deg), focal)
+        active = (p.active_params or _active_params)(li, len(p.levels_deg), focal)
         b = p.bound_units
         lim = np.full(par.n, b)
         # translation and focal per level at most ``max_translation_m`` / ``max_focal`` from here
@@ -685,7 +698,7 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
             v[active] = x
             return v
 
-        fun = _counted(lambda x, lv=lv, par=par: _cost(lv, par.camera(full(x)))[0], progress)
+        fun = _counted(lambda x, lv=lv, par=par: _cost(lv, par.camera(full(x)), p)[0], progress)
         c0 = fun(np.zeros(len(active)))
         last = li == len(p.levels_deg) - 1
         bounds = [(-lim[k], lim[k]) for k in active]
@@ -712,8 +725,8 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
     assert res is not None and par is not None
     # convergence tests on the finest level's point set
     assert lv is not None
-    end_cost, end_per = _cost(lv, cam)
-    start_cost, start_per = _cost(lv, cam0)
+    end_cost, end_per = _cost(lv, cam, p)
+    start_cost, start_per = _cost(lv, cam0, p)
     rng = np.random.default_rng(p.seed + 1)
     shuffled = lv.cell.copy()
     for r in range(lv.n_rec):  # reference bins shuffled within each recording: the NID of chance
@@ -725,7 +738,7 @@ def _refine_camera(rig: Rig, cam0: Camera, dcam: Camera, recordings: Sequence[Re
     # the probe scales with the image (a smooth thermal image changes little over 3 px)
     probe_px = max(p.probe_px, p.probe_frac * float(np.hypot(cam.width, cam.height)))
     probe = _Param(cam, probe_px, par.zm, False)
-    shifted = [_cost(lv, probe.camera(np.eye(6)[k] * sgn))[0] for k in (0, 1) for sgn in (-1, 1)]
+    shifted = [_cost(lv, probe.camera(np.eye(6)[k] * sgn), p)[0] for k in (0, 1) for sgn in (-1, 1)]
     contrast = (min(shifted) - end_cost) / max(information, 1e-3)
     converged = bool(res.success) and not on_bound and information >= p.min_information and contrast >= p.min_contrast
     if not converged:
@@ -812,8 +825,9 @@ def _level_data(cam: Camera, dcam: Camera, data: Sequence[_RecData], src_imgs: d
         idx = idx[np.argsort(d.pix[idx], kind="stable")]  # raster order: neighbours sample nearby source pixels
         uv, z = _project_uvz(cam, d.X_rig[idx])
         slot = len(slots)
-        img = _blur(src_imgs[i], sig_src)
-        ref = _blur(d.ref, sig_ref).ravel()[d.pix[idx]]
+        blur = p.image_filter or _blur
+        img = blur(src_imgs[i], sig_src)
+        ref = blur(d.ref, sig_ref).ravel()[d.pix[idx]]
         redges = np.unique(np.quantile(ref, np.linspace(0, 1, nb + 1)[1:-1]))
         ref_bin = np.searchsorted(redges, ref, side="right").astype(np.int64)
         seen = uv[cam.in_image(uv)]
@@ -838,6 +852,7 @@ def _level_data(cam: Camera, dcam: Camera, data: Sequence[_RecData], src_imgs: d
     if not slots:
         return None, np.zeros(0)
     cat = {k: np.concatenate(v) for k, v in parts.items()}
+    weight = cat["weight"] if p.point_weights is None else p.point_weights(cat["X"], roi, cat["weight"])
     lv = _Level(np.ascontiguousarray(cat["X"].T), cat["rec"], cat["cell"], cat["voff"], np.ascontiguousarray(np.concatenate(atlas, axis=0)),
-                cam.height, taper, cat["weight"], len(slots), nb, slots)
+                cam.height, taper, weight, len(slots), nb, slots)
     return lv, cat["z"]

@@ -30,7 +30,7 @@ Sources (no calibration ships with the data set):
   the rim, 0.45-0.95 m) stays in; max z = 1.15 keeps the pots and the lowest leaves (areca palm and
   philodendron reach 1.05-1.12 m) and cuts the tray's floor.
 
-  python resources/plant3dimagereg/tools/make_nominal_rig.py
+  python resources/plant3dimagereg/landmark_scripts/make_nominal_rig.py
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ def main() -> None:
     ]
     rig = {"format": "plantreg.rig", "version": 1, "depth": {"camera": "ir", "scale": 0.001},
            "roi": {"min": [-0.425, -0.525, 0.30], "max": [0.275, 0.175, 1.15]}, "cameras": cams,
-           "calibration": {"method": "nominal", "source": "resources/plant3dimagereg/tools/make_nominal_rig.py "
+           "calibration": {"method": "nominal", "source": "resources/plant3dimagereg/landmark_scripts/make_nominal_rig.py "
                            "(datasheet fields of view, typical Azure Kinect NFOV lens, rough placement)"}}
     OUT.write_text(json.dumps(rig, indent=2) + "\n")
     print(OUT)

@@ -7,7 +7,7 @@ was fitted and kept out of its fit, to check it).
 {"depth_uv": ir, "cameras": {CAMERA: other}, "note": ...}; recording paths are relative to the
 landmarks file ("recordings/01grapevine").
 
-  python resources/plant3dimagereg/tools/build_landmarks.py
+  python resources/plant3dimagereg/landmark_scripts/build_landmarks.py
 """
 
 from __future__ import annotations

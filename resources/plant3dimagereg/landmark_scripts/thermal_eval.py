@@ -17,8 +17,8 @@ time, everything else in). Ways of fitting:
   ``thermal:`` items of ``FREE``) from the thermal landmarks with the infrared held fixed
   (tested, not shipped: README, "Fit"). Nested: a LOPO fold repeats both stages without the plant.
 
-  cd resources/plant3dimagereg/tools && PYTHONPATH=../../.. python thermal_eval.py compare
-  cd resources/plant3dimagereg/tools && PYTHONPATH=../../.. python thermal_eval.py heldout ../rig.json
+  cd resources/plant3dimagereg/landmark_scripts && PYTHONPATH=../../.. python thermal_eval.py compare
+  cd resources/plant3dimagereg/landmark_scripts && PYTHONPATH=../../.. python thermal_eval.py heldout ../rig.json
 """
 
 from __future__ import annotations

@@ -13,10 +13,10 @@ Stretches (per crop, so that dim leaves and hot pots both show):
 
 Examples (from the project root)::
 
-  python resources/plant3dimagereg/tools/annotate_view.py overview 01grapevine /tmp/ov
-  python resources/plant3dimagereg/tools/annotate_view.py crop 01grapevine ir 300 250 --half 20 --zoom 10 \
+  python resources/plant3dimagereg/landmark_scripts/annotate_view.py overview 01grapevine /tmp/ov
+  python resources/plant3dimagereg/landmark_scripts/annotate_view.py crop 01grapevine ir 300 250 --half 20 --zoom 10 \
       --mark 301.5,249.0 -o /tmp/c.png
-  python resources/plant3dimagereg/tools/annotate_view.py pair 01grapevine ir 300 250 hyperspectral 250 300 -o /tmp/p.png
+  python resources/plant3dimagereg/landmark_scripts/annotate_view.py pair 01grapevine ir 300 250 hyperspectral 250 300 -o /tmp/p.png
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 DATA = Path(__file__).resolve().parents[4] / "shared" / "data" / "plant3dimagereg"
-if not DATA.is_dir():  # worktree layout /work/<tree>/resources/plant3dimagereg/tools
+if not DATA.is_dir():  # worktree layout /work/<tree>/resources/plant3dimagereg/landmark_scripts
     DATA = Path("/work/shared/data/plant3dimagereg")
 
 

@@ -15,7 +15,7 @@ If a plant's own pose leaves a median residual of ``m`` px on its own landmarks,
 per camera for all plants) can be expected to do better than ``m`` on that plant's landmarks,
 and a leave-one-plant-out figure is larger still.
 
-    cd resources/plant3dimagereg/tools && PYTHONPATH=../../.. python pose_bound.py [RIG]
+    cd resources/plant3dimagereg/landmark_scripts && PYTHONPATH=../../.. python pose_bound.py [RIG]
 
 RIG: default ``../rig.json``. Landmarks: ``landmarks.json`` and ``landmarks_heldout.json``.
 """

@@ -11,7 +11,7 @@ infrared pixel near the plants) along its own silhouette's inward normal. A read
 ``"held_out"`` entry (why it is kept out of rig.json's fit) is carried over; build_landmarks.py
 writes those points to ``landmarks_heldout.json``.
 
-  python resources/plant3dimagereg/tools/finalize.py
+  python resources/plant3dimagereg/landmark_scripts/finalize.py
 """
 
 from __future__ import annotations

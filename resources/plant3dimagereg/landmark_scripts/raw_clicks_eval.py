@@ -17,7 +17,7 @@ landmark test (clicks spread over the plant) it moved 3 of 24 clicks near an ove
 edge onto the front leaf (outliers), i.e. the rule is wrong for clicks that are not silhouette
 features.
 
-  cd resources/plant3dimagereg/tools && PYTHONPATH=../../.. python raw_clicks_eval.py [raw,raw_uv_stepped_z,mapped_step,shipped] [FREE]
+  cd resources/plant3dimagereg/landmark_scripts && PYTHONPATH=../../.. python raw_clicks_eval.py [raw,raw_uv_stepped_z,mapped_step,shipped] [FREE]
 """
 
 from __future__ import annotations

@@ -63,77 +63,61 @@ def recordings(rig: Rig, variant: set[str], plants=PLANTS) -> list[Recording]:
     return recs
 
 
-_ORIG_LEVEL_DATA = R._level_data
-_ORIG_BLUR = R._blur
-
-
 def _grad_blur(img: np.ndarray, sigma: float) -> np.ndarray:
     """Gradient magnitude of the blurred image (both the reference and the source): edges only."""
-    b = _ORIG_BLUR(img, max(sigma, 0.8))
+    b = R._blur(img, max(sigma, 0.8))
     gx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3)
     return np.sqrt(gx * gx + gy * gy)
 
 
-def set_variant(variant: set[str]) -> None:
-    """Patch the refinement's point weights for ``roi`` (plant points only) and its images for
-    ``grad`` (gradient magnitude)."""
-    R._blur = _grad_blur if "grad" in variant else _ORIG_BLUR
+def _plant_points_only(X: np.ndarray, roi, weight: np.ndarray) -> np.ndarray:
+    obj = np.all((X >= roi[0]) & (X <= roi[1]), axis=1)
+    return np.where(obj, weight, 0.0)
+
+
+def apply_variant(p: R.RefineParams, variant: set[str]) -> R.RefineParams:
+    """The variant through the refinement's experiment hooks (``RefineParams``): ``grad`` compares
+    gradient magnitudes, ``rot`` / ``shift`` search a rotation / an image shift only at every
+    level, ``roi`` weights the plant's points only."""
+    p.image_filter = _grad_blur if "grad" in variant else None
     if "rot" in variant:  # a rotation only (image shift and roll) at every level
-        R._active_params = lambda level, n, focal: [0, 1, 2]
+        p.active_params = lambda level, n, focal: [0, 1, 2]
     elif "shift" in variant:  # an image shift only
-        R._active_params = lambda level, n, focal: [0, 1]
-    else:
-        R._active_params = _ORIG_ACTIVE
-    if "roi" in variant:
-        def level_data(cam, dcam, data, src, ss, sr, p, reach, roi, visible):
-            lv, z = _ORIG_LEVEL_DATA(cam, dcam, data, src, ss, sr, p, reach, roi, visible)
-            if lv is not None:
-                X = lv.XT.T
-                obj = np.all((X >= roi[0]) & (X <= roi[1]), axis=1)
-                lv.weight = np.where(obj, lv.weight, 0.0)
-            return lv, z
-        R._level_data = level_data
-    else:
-        R._level_data = _ORIG_LEVEL_DATA
+        p.active_params = lambda level, n, focal: [0, 1]
+    p.point_weights = _plant_points_only if "roi" in variant else None
+    return p
 
 
-_ORIG_ACTIVE = R._active_params
-_ORIG_COST = R._cost
-#: landmark term of the ``lmW`` variants: (X_rig (L, 3), clicked uv (L, 2), weight W)
-LM_TERM: list = []
-
-
-def set_landmark_term(rig: Rig, lm, cam: str, variant: set[str]) -> None:
-    """``lmW``: add W * mean(log(1 + r^2 / 3^2)) of the landmarks ``lm`` (r px, Cauchy at 3 px,
-    the reading uncertainty) to the NID: landmarks and image in one objective."""
+def landmark_cost(rig: Rig, lm, cam: str, variant: set[str]):
+    """``lmW``: W * mean(log(1 + r^2 / 3^2)) of the landmarks ``lm`` (r px, Cauchy at 3 px, the
+    reading uncertainty), added to the NID: landmarks and image in one objective (None without lmW)."""
     from plantreg_gui.core.rigfit.rigfit import _collect
-    LM_TERM.clear()
+
     w = [float(x[2:]) for x in variant if x.startswith("lm") and x[2:].replace(".", "").isdigit()]
     if not w:
-        R._cost = _ORIG_COST
-        return
+        return None
     duv, z, keys, obs, _ = _collect(rig, only(lm, cam), {cam})
     dcam = rig.depth()
     xy = dcam.undistort_normalized(duv)
     X = dcam.to_rig(np.concatenate([xy, np.ones((len(xy), 1))], axis=1) * z[:, None])
-    LM_TERM.extend([np.array([X[o.lm] for o in obs]), np.array([o.uv for o in obs]), w[0]])
+    Xl, uvl, weight = np.array([X[o.lm] for o in obs]), np.array([o.uv for o in obs]), w[0]
 
-    def cost(lv, camera):
-        c, per = _ORIG_COST(lv, camera)
-        uv, _ = camera.project(LM_TERM[0])
-        r2 = np.sum((uv - LM_TERM[1]) ** 2, axis=1)
-        return c + LM_TERM[2] * float(np.mean(np.log1p(r2 / 9.0))), per
-    R._cost = cost
+    def cost(camera) -> float:
+        uv, _ = camera.project(Xl)
+        r2 = np.sum((uv - uvl) ** 2, axis=1)
+        return weight * float(np.mean(np.log1p(r2 / 9.0)))
+    return cost
 
 
-def params(variant: set[str]) -> R.RefineParams:
-    p = R.RefineParams(keep_if_landmarks_disagree=False, workers=1)
+def params(variant: set[str], extra_cost=None) -> R.RefineParams:
+    p = apply_variant(R.RefineParams(keep_if_landmarks_disagree=False, workers=1), variant)
+    p.extra_cost = extra_cost
     if "fine" in variant:
         p.levels_deg = (0.2, 0.0)
     if any(x.startswith("lm") for x in variant):
-        # the convergence tests compare the patched cost with a chance NID without the landmark
-        # term: meaningless here (the held-out landmarks judge)
+        # the convergence tests compare the cost with the landmark term against a chance NID
+        # without it: meaningless here (the held-out landmarks judge)
         p.min_information = p.min_contrast = -1e9
     return p
 
@@ -154,9 +138,8 @@ def fmt(per: dict[str, list[float]]) -> str:
             + " ".join(f"{k[:6]} {np.median(v):.2f}" for k, v in sorted(per.items())))
 
 
-def refine(rig: Rig, recs: list[Recording], cam: str, variant: set[str]) -> tuple[Rig, dict]:
-    set_variant(variant)
-    res = R.refine_rig(rig, recs, cameras=[cam], params=params(variant))
+def refine(rig: Rig, recs: list[Recording], cam: str, variant: set[str], extra_cost=None) -> tuple[Rig, dict]:
+    res = R.refine_rig(rig, recs, cameras=[cam], params=params(variant, extra_cost))
     return res.rig, res.report["cameras"][cam]
 
 
@@ -166,10 +149,10 @@ def cmd_heldout(cam: str, variant: set[str], mode: str) -> None:
     lm_out = load(RES / "landmarks_heldout.json", rig)
     print(f"start rig.json: fitted {fmt(judge(rig, lm_fit, cam))}\n   held-out {fmt(judge(rig, lm_out, cam))}")
     groups = [PLANTS] if mode == "joint" else [[p] for p in PLANTS]
-    set_landmark_term(rig, lm_fit, cam, variant)
+    lmc = landmark_cost(rig, lm_fit, cam, variant)
     for g in groups:
         t0 = time.time()
-        out, rep = refine(rig, recordings(rig, variant, g), cam, variant)
+        out, rep = refine(rig, recordings(rig, variant, g), cam, variant, lmc)
         print(f"{mode} {','.join(x[:6] for x in g)}: conv {rep['converged']} NID {rep['start_cost']:.4f}->{rep['end_cost']:.4f} "
               f"info {rep['information']:.3f} contrast {rep['contrast']:.3f} change {rep['change']} ({time.time() - t0:.0f} s)")
         pf, po = judge(out, lm_fit, cam), judge(out, lm_out, cam)
@@ -193,8 +176,8 @@ def cmd_lopo(cam: str, variant: set[str], mode: str) -> None:
         b = judge(start, [r], cam)
         g = PLANTS if mode == "joint" else [plant]
         t0 = time.time()
-        set_landmark_term(start, only(lm, cam, drop_rec=r.name), cam, variant)
-        out, rep = refine(start, recordings(start, variant, g), cam, variant)
+        lmc = landmark_cost(start, only(lm, cam, drop_rec=r.name), cam, variant)
+        out, rep = refine(start, recordings(start, variant, g), cam, variant, lmc)
         a = judge(out, [r], cam)
         base.update(b)
         ref.update(a)
@@ -209,7 +192,6 @@ def cmd_scan(cam: str, plant: str, variant: set[str], png: str | None) -> None:
     lm = load(RES / "landmarks.json", rig) + (load(RES / "landmarks_heldout.json", rig) if cam == "thermal" else [])
     plants = PLANTS if plant == "all" else [plant]
     recs = recordings(rig, variant, plants)
-    set_variant(variant)
     p = params(variant)
     dcam = rig.depth()
     camera = rig.camera(cam)
@@ -289,8 +271,7 @@ def cmd_field(cam: str, plant: str, variant: set[str], png: str, tile: int = 64,
     if len(lm) > 1:  # fitted and held-out points of the plant in one entry
         lm = [type(lm[0])(lm[0].name, lm[0].depth_m, [x for r in lm for x in r.points])]
     rec = recordings(rig, variant, [plant])[0]
-    set_variant(variant)
-    p = R.RefineParams(candidates=100)  # every usable depth pixel
+    p = apply_variant(R.RefineParams(candidates=100), variant)  # every usable depth pixel
     d = R._prepare_recording(rig, rec, R.pixel_rays_cam(rig.depth()), p, np.random.default_rng(0))
     camera = rig.camera(cam)
     uv, z = R._project_uvz(camera, d.X_rig)
@@ -300,8 +281,9 @@ def cmd_field(cam: str, plant: str, variant: set[str], png: str, tile: int = 64,
     if "roi" in variant:
         X = d.X_rig
         vis &= np.all((X >= rig.roi_min) & (X <= rig.roi_max), axis=1)
-    src = R._blur(R._single_channel(rec.images[cam]), 1.0)
-    ref = R._blur(d.ref, 0.8).ravel()[d.pix]
+    blur = p.image_filter or R._blur
+    src = blur(R._single_channel(rec.images[cam]), 1.0)
+    ref = blur(d.ref, 0.8).ravel()[d.pix]
     shifts = [(a, b) for a in range(-reach, reach + 1) for b in range(-reach, reach + 1)]
     out = []
     for v0 in range(0, camera.height, tile):

@@ -2,10 +2,10 @@
 
 Run from the project root with the venv's python and PYTHONPATH = project root:
 
-  python resources/plant3dimagereg/tools/silhouette_eval.py agree [RIG]          # outline agreement of a rig
-  python resources/plant3dimagereg/tools/silhouette_eval.py only CAM nominal|rig # outlines alone, no landmarks
-  python resources/plant3dimagereg/tools/silhouette_eval.py lopo CAM K[,K...] [free_focal=1]
-  python resources/plant3dimagereg/tools/silhouette_eval.py clicks CAM         # where the clicks sit in the masks
+  python resources/plant3dimagereg/landmark_scripts/silhouette_eval.py agree [RIG]          # outline agreement of a rig
+  python resources/plant3dimagereg/landmark_scripts/silhouette_eval.py only CAM nominal|rig # outlines alone, no landmarks
+  python resources/plant3dimagereg/landmark_scripts/silhouette_eval.py lopo CAM K[,K...] [free_focal=1]
+  python resources/plant3dimagereg/landmark_scripts/silhouette_eval.py clicks CAM         # where the clicks sit in the masks
 
 ``lopo``: for each plant with landmarks of CAM, the start is the landmark fit (``rigfit``,
 ``--free ir:k1``, this camera) on the OTHER plants' landmarks (the nominal rig where they are
