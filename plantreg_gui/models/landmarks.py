@@ -452,7 +452,7 @@ class LandmarkSession:
         ``in_process``: run the refinement in a child process (:func:`~.procs.call_in_process`;
         the routine must be picklable). For the desktop app: on threads, the refinement's camera
         threads hold the GIL for stretches (GUI-thread gaps while it runs) and notice a cancel only
-        at their next cancellation point (up to 2.8 s on the real plants); a child is stopped at once."""
+        at their next cancellation point (seconds apart on the real plants); a child is stopped at once."""
         fn = self.refine_fn
         if fn is None:
             try:

@@ -120,7 +120,7 @@ def load_job(rig_path: Path | None, rec_path: Path, rig: Rig | None, settings, p
 
 
 #: Write the demo in a child process: building the scene holds the GIL for seconds in Open3D
-#: calls (mesh conversion, BVH), which froze the GUI thread for 1-2 s on a worker thread.
+#: calls (mesh conversion, BVH), which froze the GUI thread from a worker thread.
 DEMO_IN_PROCESS = True
 
 

@@ -150,7 +150,7 @@ def read_images(paths: list[Path], while_decoding: Callable[[], Any] | None = No
     and a hyperspectral cube decode side by side instead of one after the other.
     ``while_decoding()`` is called before the decoders finish -- alongside them when more than one
     thread decodes -- and not at all if a header is refused: GIL-bound work placed there
-    (``plantreg register`` loads Open3D's extension, ~0.4 s with the GIL held) runs while the
+    (``plantreg register`` loads Open3D's extension, long with the GIL held) runs while the
     decoders need no GIL. Threads: at most ``OMP_NUM_THREADS`` when set (``plantreg batch`` gives
     each worker process its share of the cores), else the cores this process may use.
     """

@@ -1,5 +1,5 @@
 """256-entry uint8 RGB tables of the colour maps plantreg uses by default (and a few common ones),
-generated from matplotlib so that previews do not need to import it (~0.5 s of start-up).
+generated from matplotlib so that previews do not need to import it (a slow import at start-up).
 
 Regenerate with ``python -m plantreg_gui.core.display.cmap_tables``; ``tests/test_batch.py`` checks them
 against matplotlib."""

@@ -121,8 +121,8 @@ def colormap_lut(name: str) -> np.ndarray:
 
 
 def any_channel(b: np.ndarray) -> np.ndarray:
-    """``b.any(axis=-1)`` for (..., C) bool with few channels: an OR of the C planes, ~7x faster
-    than numpy's reduction along a short last axis (181 -> 24 ms on a 4K RGB mask); same values."""
+    """``b.any(axis=-1)`` for (..., C) bool with few channels: an OR of the C planes, much faster
+    than numpy's reduction along a short last axis; same values."""
     out = b[..., 0].copy()
     for c in range(1, b.shape[-1]):
         out |= b[..., c]
@@ -139,7 +139,7 @@ def _normalise_u8(img: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np
     out = np.empty(a.shape, np.uint8)
     nan = np.zeros(a.shape[:2], bool) if is_float else None
     # by blocks of rows that stay in the cache: the same float32 operations as on the whole image
-    # (so the same bytes), ~3x faster on a 4K frame than whole-image passes through memory.
+    # (so the same bytes), faster on a 4K frame than whole-image passes through memory.
     # cv2.convertScaleAbs would fold negatives; do it in float, clip, cast (NaN pixels are painted later)
     rows = max(1, _BLOCK_VALUES // max(1, int(np.prod(a.shape[1:]))))
     u = np.empty((min(rows, a.shape[0]), *a.shape[1:]), np.float32)
@@ -164,7 +164,7 @@ def _normalise_u8(img: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np
 
 def _paint_background(rgb: np.ndarray, mask: np.ndarray) -> None:
     """``rgb[mask] = BACKGROUND_RGB`` for (H, W, 3) uint8 ``rgb`` and (H, W) bool ``mask``, in place:
-    OpenCV's masked copy, ~3x faster than numpy's ``copyto(where=)`` on a 4K view (~88 % background)."""
+    OpenCV's masked copy, faster than numpy's ``copyto(where=)`` on a 4K view (mostly background)."""
     m = np.ascontiguousarray(mask, dtype=bool)
     if rgb.flags.c_contiguous and rgb.dtype == np.uint8 and rgb.ndim == 3 and rgb.shape[2] == 3:
         # by blocks of rows (each a contiguous slice, written in place): a background block of
@@ -195,7 +195,7 @@ def _background(h: int, w: int) -> np.ndarray:
 
 def _apply_lut(u8: np.ndarray, lut: np.ndarray) -> np.ndarray:
     """(H, W) uint8 indices -> (H, W, 3) uint8 through a (256, 3) table."""
-    # cv2.LUT on a 3-channel copy is ~4x faster than numpy fancy indexing on 4K frames
+    # cv2.LUT on a 3-channel copy is faster than numpy fancy indexing on 4K frames
     return cv2.LUT(cv2.merge([u8, u8, u8]), lut.reshape(256, 1, 3))
 
 
@@ -216,8 +216,7 @@ def colorize(img: np.ndarray, cmap: str = "gray", limits: tuple[float, float] | 
 def _one_blas_thread():
     """A context in which BLAS/LAPACK run in one thread. Why: the PCA's products are small
     (a ~5000 x B covariance, a B x B eigen-decomposition); OpenBLAS's threads mostly spin
-    waiting for each other there -- 0.35-0.8 s of CPU for a 204-band preview with 2 threads on
-    a busy 2-core machine, 0.1 s with one."""
+    waiting for each other there, several times the CPU of one thread on a busy machine."""
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - a dependency; without it, BLAS's own threads
@@ -229,7 +228,7 @@ def _one_blas_thread():
 
 def finite_rows(flat: np.ndarray) -> np.ndarray:
     """``np.isfinite(flat).all(axis=1)`` for (N, C) ``flat``, (N,) bool. A few channels (points,
-    RGB) are checked plane by plane (see :func:`any_channel`: ~5x faster than the reduction along
+    RGB) are checked plane by plane (see :func:`any_channel`: faster than the reduction along
     a short axis); many bands only in the rows whose first band is finite: a registered cube is NaN
     off the object (~85 % of its rows), and the full check of a 204-band cube is a pass over all
     its values."""

@@ -140,7 +140,7 @@ def _write_mosaic(ctx: ExportContext, kind: str, cam: str, rep: Reporter) -> str
 
 def _summary_draft(ctx: ExportContext) -> dict[str, Any]:
     """``summary.json`` but its export timings: made while the registered images are still being
-    encoded in the background (case counts, mapped pixels: ~0.06 s off the end of an export)."""
+    encoded in the background (case counts, mapped pixels: off the end of an export)."""
     return build_summary(ctx.result, ctx.rig, ctx.recording, ctx.inputs, export_timings={},
                          files=ctx.written + ["summary.json"])
 
@@ -398,7 +398,7 @@ def _hit_tiles(reg: HitImage) -> Callable[[int, int, int, int], np.ndarray | Non
     """``tile_of`` for :func:`~.imageio.write_tiff_tiled` of a HitImage: its blocks, and None at
     once for a block without a hit, from an occupancy grid of the writer's tile size made once.
     Why: ~90 % of a 4K view's 32,400 tiles hold no hit, and finding that out by searching the
-    hits tile by tile (``HitImage.block``) cost ~0.4 s of GIL-holding CPU; the grid takes 0.01 s.
+    hits tile by tile (``HitImage.block``) holds the GIL for long; the grid is quick.
     Any block geometry is answered correctly (every grid cell it touches is looked at)."""
     H, W = reg.shape[:2]
     g = tiff_tile_edge(_bands(reg), 4)  # the writer's tile edge for float32: one cell per tile
@@ -666,7 +666,7 @@ def _versions_cached() -> dict[str, str | None]:
 def _dist_version(name: str) -> str | None:
     """The installed version of distribution ``name`` (None if not installed), from the name of
     its ``<name>-<version>.dist-info`` folder beside the module. Why: ``importlib.metadata``
-    imports the ``email`` package and parses METADATA files: ~40-70 ms of a paper-sized
+    imports the ``email`` package and parses METADATA files: a share of a paper-sized
     ``plantreg register`` (its summary is written on the critical path)."""
     import importlib.util
 

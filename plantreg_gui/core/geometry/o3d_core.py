@@ -2,7 +2,7 @@
 
 Why: ``import open3d`` runs ``open3d/__init__.py``, which unconditionally imports
 ``open3d.visualization`` and with it ``draw_plotly`` -> Dash, Plotly, Flask and (via Dash)
-IPython: ~0.9 s of a command-line run that only casts rays. The ray caster lives in the compiled
+IPython: a large share of a command-line run that only casts rays. The ray caster lives in the compiled
 extension module (``open3d/pybind*.so``, in Open3D < 0.19 ``open3d/cpu/pybind*.so``), which
 needs nothing from the Python package. :func:`open3d_core` loads that extension by itself,
 under the name the package gives it, so that a later ``import open3d`` (the GUI, a user's
@@ -78,7 +78,7 @@ def _load_extension() -> ModuleType | None:
 def load_in_background() -> threading.Thread:
     """Start loading the compiled core in a thread and return it (join it before exiting).
 
-    Why: loading it takes ~0.5 s with the GIL held; started before the recording is read, it
+    Why: loading it takes long with the GIL held; started before the recording is read, it
     overlaps with the image decoding (OpenCV and numpy release the GIL). A failure is left to the
     first real call of :func:`open3d_core`, which reports it where it matters.
     """

@@ -31,8 +31,8 @@ from ..camera.camera import _CHUNK, Camera, _has_tilt, distort_normalized  # noq
 #: Rays per Open3D call: bounds the temporaries (cast_rays returns ~40 bytes per ray).
 RAY_CHUNK = 1 << 20
 
-#: Open3D's ray casting holds the GIL for a whole call (1M rays ~ 0.5-1.3 s), which freezes the GUI
-#: thread while a worker registers; calls are split so that none holds it for more than ~40 ms.
+#: Open3D's ray casting holds the GIL for a whole call (a million rays: a visible freeze of the GUI
+#: thread while a worker registers); calls are split into pieces short for the GUI thread.
 GIL_CHUNK = 1 << 15
 
 #: Occlusion segments against the uncertainty mesh skip their first centimetre (they all start at
@@ -161,7 +161,7 @@ def _grid_rays(cam: Camera, emit, cells: np.ndarray | None = None, grid: RayGrid
     the inverse Jacobian): the camera's step count for every pixel (one or two,
     :func:`_newton_steps`), then per pixel until < 1e-6 px. Pixels still off by more than 1e-4 px
     (a model that folds over) are redone exactly. Plain numpy: no SciPy interpolation package to
-    import (~1 s of a command's start-up).
+    import (a large share of a command's start-up).
     """
     H, W = cam.height, cam.width
     grid = grid if grid is not None else ray_grid(cam)
@@ -303,7 +303,7 @@ def pixel_rays_toward(cam: Camera, cones: list["ConeMarks | None"],
     of the cone marks' own 1e-4 margin; models that fold get no bound (every cell computed).
 
     Why: a 4K target has 8.3 M pixels and the object covers ~15 % of its view; undistorting
-    every pixel (Newton steps) and testing every ray cost ~2 s. The grid's cells are tested
+    every pixel (Newton steps) and testing every ray cost seconds in a 4K view. The grid's cells are tested
     whole: a cell's pixels lie within its corners' box (``grid.margin`` wider), and a cell whose
     box meets no marked cone cell is skipped. ``grid``: :func:`ray_grid` of ``cam`` (computed if
     not given).

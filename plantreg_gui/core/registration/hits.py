@@ -28,10 +28,10 @@ def nan_array(shape: tuple[int, ...]) -> np.ndarray:
 
     Why: numpy asks the kernel for transparent huge pages on large allocations; where the kernel
     compacts memory on demand for them (``defrag = madvise``, a common default) the first touch
-    of a fresh result stalls while it assembles 2 MB pages -- measured here 0.6-0.8 s for the
-    300 MB of a 204-band cube registered into the 640x576 infrared view, against 0.15 s with
-    ordinary pages. For multi-gigabyte results (the same cube in a 4K view: 6.8 GB) the number of
-    page faults dominates instead, and huge pages are the faster choice (measured 5-18 s vs 18-22 s).
+    of a fresh result stalls while it assembles 2 MB pages -- several times the time with
+    ordinary pages for the 300 MB of a 204-band cube registered into the 640x576 infrared view
+    (figures: docs/performance.md). For multi-gigabyte results (the same cube in a 4K view:
+    6.8 GB) the number of page faults dominates instead, and huge pages are the faster choice.
     """
     n = int(np.prod(shape))
     lo, hi = _PLAIN_PAGES_BYTES

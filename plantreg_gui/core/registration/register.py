@@ -358,7 +358,7 @@ class Registrar:
                     img = images[scam.name]
                     C = 1 if img.ndim == 2 else int(np.prod(img.shape[2:]))
                     # at the hits only; sample_bilinear writes NaN only where no sample goes (a
-                    # full NaN pass first cost ~0.5 s for the 1 GB of a 204-band cube in a 4K view)
+                    # full NaN pass first is a pass over the 1 GB of a 204-band cube in a 4K view)
                     vals = np.empty((len(obj_idx), C), dtype=np.float32)
                     sub = progress.sub(a + 0.5 * (b - a), b)
                     if on_image is not None and keep_at_hits(H, W, C):
@@ -415,7 +415,7 @@ DENSE_LIMIT_BYTES = 1 << 30
 #: Cubes (more than 4 bands) are kept at the hits already above this size, in views of at most
 #: :data:`CUBE_HITS_MAX_PIXELS` pixels: the 204-band cube in the 640x576 infrared view is 300 MB
 #: dense, 88 % NaN -- filling it, scanning its tiles for NaN when writing and its rows when
-#: rendering cost ~0.5 s CPU of a 3.5 s `plantreg register`. Up to that many pixels a preview
+#: rendering were a large share of a `plantreg register`'s CPU. Up to that many pixels a preview
 #: takes its statistics from every pixel, so the hits-only preview is the dense one bit for bit
 #: (core.display: ``_MAX_SAMPLES``); above it, the (strided) statistics may pick other pixels.
 CUBE_HITS_BYTES = 64 << 20

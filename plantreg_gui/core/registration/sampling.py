@@ -11,8 +11,8 @@ from ..geometry.raycast import RAY_CHUNK
 from ..progress import Reporter, ensure_reporter
 
 #: Samples of a band-sequential cube gathered and written together: their (C, rows) float32
-#: block (3.3 MB for 204 bands) is still in cache when it is written out transposed (sampling the
-#: 204-band cube into the infrared or the 4K view: -10 to -15 % CPU against 64 MB blocks; same values).
+#: block (3.3 MB for 204 bands) is still in cache when it is written out transposed (less CPU than
+#: 64 MB blocks; the same values).
 _BAND_ROWS = 1 << 12
 
 

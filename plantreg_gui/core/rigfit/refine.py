@@ -384,8 +384,8 @@ def _project_T(cam: Camera, XT: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ``v`` (N,) each, without its NaN marking (callers keep points in front of the camera).
 
     The cost's hot path: ``R @ XT`` is one small BLAS call, where ``X @ R.T`` with X (N, 3) was
-    measured at 40 ms CPU for 90,000 points with OpenBLAS threads spinning on a loaded machine
-    (this whole function: 3 ms). The lens model is the camera module.s (:func:`~..camera.camera.distort_normalized`)."""
+    slow with OpenBLAS threads spinning on a loaded machine, this whole function is not. The
+    lens model is the camera module's (:func:`~plantreg_gui.core.camera.camera.distort_normalized`)."""
     if _has_tilt(cam):
         uv = cam.project(XT.T)[0]
         return uv[:, 0], uv[:, 1]

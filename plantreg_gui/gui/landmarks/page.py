@@ -64,8 +64,8 @@ def shown_rgb8(s: LandmarkSession, camera: str, key: str | None = None) -> np.nd
 def read_session(rig: str | Path, landmarks: str | Path | None, recordings: list[str | Path],
                  progress: Reporter) -> tuple[LandmarkSession, dict[tuple[str, str], np.ndarray]]:
     """The page's opening, for a worker: the session with every recording read, and the current
-    recording's images as shown, by (recording, camera) (a hyperspectral cube's false colour took
-    0.1-0.17 s on the GUI thread)."""
+    recording's images as shown, by (recording, camera) (a hyperspectral cube's false colour is
+    too slow for the GUI thread)."""
     s = LandmarkSession.load(rig, landmarks, recordings, progress=progress.sub(0.0, 0.85))
     shown = {}
     names = [s.rig.depth().name] + s.camera_names()
@@ -289,7 +289,7 @@ class LandmarkPage(QWidget):
     # ------------------------------------------------------------------ session
     def open(self, rig: str | Path, landmarks: str | Path | None = None,
              recordings: list[str | Path] | None = None) -> Worker:
-        """Open files on a worker (reading the recordings took ~0.3 s on the GUI thread): the page
+        """Open files on a worker (reading the recordings is too slow for the GUI thread): the page
         says it is reading, Cancel stops it, a bad file becomes a "Cannot open" dialog naming it,
         and the session read replaces the shown one. Opening again while reading drops the
         earlier read (its result, error or cancellation no longer concern the page)."""

@@ -132,7 +132,7 @@ class CloudView(QWidget):
         self.plotter = plotter
         self._axes = False
         # hidden until show_gl_widget, which paints the background only; VTK's first frame
-        # (~100 ms with software GL) follows in first_frame, each in an event-loop turn of its own
+        # (long with software GL) follows in first_frame, each in an event-loop turn of its own
         plotter.interactor.hide()
         # a plain background: a gradient is one more shader to compile in the first frame
         self.plotter.set_background("#22272e")
@@ -145,7 +145,7 @@ class CloudView(QWidget):
 
     def attach_gl_widget(self) -> None:
         """Put the (hidden) GL widget into the window. The first one makes Qt re-create the
-        window's native surface for OpenGL composition (60-190 ms with software OpenGL), so
+        window's native surface for OpenGL composition (long with software OpenGL), so
         this is a stage of its own, apart from the plotter's constructor."""
         w = self.plotter.interactor if self.plotter is not None else None
         if w is not None and w.parent() is not self.host:

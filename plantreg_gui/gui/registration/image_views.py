@@ -443,7 +443,7 @@ class SpectrumPlot(QWidget):
         from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
         from matplotlib.figure import Figure
 
-        # fixed margins: a constrained layout is re-solved on every draw (~0.1-0.5 s on the GUI thread)
+        # fixed margins: a constrained layout is re-solved on every draw (a stall of the GUI thread)
         self.figure = Figure(figsize=(4, 1.6), dpi=90)
         self.figure.subplots_adjust(left=0.17, right=0.97, top=0.86, bottom=0.25)
         self.canvas = FigureCanvasQTAgg(self.figure)
