@@ -1,5 +1,6 @@
-"""The application models: the state of the registration workspace, the landmark page and (pending)
-the calibration wizard, without Qt, on one small event mechanism (:mod:`.events`). Every
+"""The application models: the state of the registration workspace (:mod:`.registration`,
+:mod:`.layers`), the landmark page (:mod:`.landmarks`) and the calibration wizard
+(:mod:`.calibration`), without Qt, on one small event mechanism (:mod:`.events`). Every
 mutation goes through a model method that emits; windows and pages are views of a model that
 subscribe to its events (napari's evented models). Tests drive the models without a display.
 

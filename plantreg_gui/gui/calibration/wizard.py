@@ -23,7 +23,7 @@ from .capture_page import CapturePage
 from .depth_page import DepthPage
 from .extrinsics_page import ExtrinsicsPage
 from .intrinsics_page import IntrinsicsPage
-from .model import WizardModel
+from ...models.calibration import WizardModel
 from .review_page import ReviewPage
 from .rig_page import RigPage
 from .save_page import SavePage

@@ -1,8 +1,10 @@
-"""What the wizard knows about the open session: detections, review choices, results.
+"""What the calibration wizard knows about the open session: detections, review choices, results.
 
-Plain state with change signals; every computation lives in the calibration engine and runs on
-workers (see :mod:`.wizard`). Review choices (exclusions, per-image detection options) are kept
-in ``Session.review`` and saved with the session, so it reopens where it was left.
+Plain state with change events (:mod:`.events`, the models' one mechanism: ``model.<name>.connect``
+as the pages did with Qt signals); every computation lives in the calibration engine and runs on
+workers (see :mod:`plantreg_gui.gui.calibration.wizard`). Review choices (exclusions, per-image
+detection options) are kept in ``Session.review`` and saved with the session, so it reopens
+where it was left.
 """
 
 from __future__ import annotations
@@ -10,23 +12,25 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from PySide6.QtCore import QObject, Signal
+
+from .events import Event
 
 Key = tuple[str, str]  # (pose, camera)
 
 
-class WizardModel(QObject):
-    session_changed = Signal()
-    detection_changed = Signal(object)  # Key, or None for "many changed"
-    review_changed = Signal()
-    calibration_changed = Signal()
-    report_changed = Signal()
-    saved_changed = Signal()
-    poses_changed = Signal()  # pose folders added to or removed from the session
-    view_selected = Signal(object)  # Key: show this image in the corner review
+class WizardModel:
+    """The wizard's state. Events: ``session_changed()``, ``detection_changed(key)`` (a Key, or
+    None for "many changed"), ``review_changed()``, ``calibration_changed()``,
+    ``report_changed()``, ``saved_changed()``, ``poses_changed()`` (pose folders added to or
+    removed from the session), ``view_selected(key)`` (show this image in the corner review).
+    ``parent`` is accepted for the wizard's call and not used (the model owns no Qt object)."""
 
-    def __init__(self, parent: QObject | None = None) -> None:
-        super().__init__(parent)
+    EVENTS = ("session_changed", "detection_changed", "review_changed", "calibration_changed", "report_changed",
+              "saved_changed", "poses_changed", "view_selected")
+
+    def __init__(self, parent: Any = None) -> None:
+        for name in self.EVENTS:
+            setattr(self, name, Event(name))
         self.session = None  # core.calibration.Session
         self.detections: dict[Key, Any] = {}
         self.thumbnails: dict[Key, np.ndarray] = {}
@@ -79,7 +83,7 @@ class WizardModel(QObject):
 
     def options(self) -> dict[Key, Any]:
         """Detection options per image: the stored ones, with the session-wide detector."""
-        from ...core.calibration.detect import DetectOptions
+        from ..core.calibration.detect import DetectOptions
 
         if self.session is None:
             return {}
@@ -94,7 +98,7 @@ class WizardModel(QObject):
     def detector(self) -> str:
         """The session-wide chessboard corner detector (``"auto"`` or ``"classic"``, see
         :class:`~plantreg_gui.core.calibration.detect.DetectOptions`), kept in ``review``."""
-        from ...core.calibration.detect import DETECTORS
+        from ..core.calibration.detect import DETECTORS
 
         det = self.session.review.get("detector", "auto") if self.session is not None else "auto"
         return det if det in DETECTORS else "auto"
@@ -102,7 +106,7 @@ class WizardModel(QObject):
     def set_detector(self, detector: str) -> bool:
         """Use ``detector`` for every image: kept in ``review`` and in each image's options (so
         that ``plantreg calibrate`` on the session does the same). False if nothing changed."""
-        from ...core.calibration.detect import DetectOptions
+        from ..core.calibration.detect import DetectOptions
 
         s = self.session
         if s is None or (detector == self.detector() and "detector" in s.review):
@@ -148,7 +152,7 @@ class WizardModel(QObject):
 
     def add_pose_folders(self, dirs) -> tuple[list[str], list[str]]:
         """Copy pose folders into the session; returns (added pose names, problems)."""
-        from ...core.errors import PlantregError
+        from ..core.errors import PlantregError
 
         added, problems = [], []
         for d in dirs:
@@ -163,7 +167,7 @@ class WizardModel(QObject):
 
     def remove_poses(self, poses) -> list[str]:
         """Delete pose folders from the session and forget their detections; returns problems."""
-        from ...core.errors import PlantregError
+        from ..core.errors import PlantregError
 
         problems = []
         poses = set(poses)
