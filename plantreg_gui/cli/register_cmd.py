@@ -109,9 +109,14 @@ def load_rig_for_target(rig_path: Path, target: str):
     return rig
 
 
+#: Options that set a registration parameter: option attribute -> (parameter, type).
+_VALUE_OPTIONS = {"edge_angle": ("edge_angle_deg", float), "flying_jump": ("flying_jump_rel", float),
+                  "denoise_size": ("denoise_size", int), "mixed_radius": ("mixed_radius_px", float)}
+#: Switches that turn a registration parameter off: option attribute -> parameter.
+_OFF_SWITCHES = {"no_flying_filter": "flying_filter", "remove_flying": "flying_repair",
+                 "no_fill_holes": "fill_holes", "no_denoise": "denoise"}
 #: The command-line option of each registration parameter (named in range errors).
-OPTION_NAMES = {"edge_angle_deg": "--edge-angle", "flying_jump_rel": "--flying-jump",
-                "denoise_size": "--denoise-size", "mixed_radius_px": "--mixed-radius"}
+OPTION_NAMES = {field: "--" + opt.replace("_", "-") for opt, (field, _t) in _VALUE_OPTIONS.items()}
 
 
 def registration_params(args: argparse.Namespace):
@@ -120,22 +125,12 @@ def registration_params(args: argparse.Namespace):
     from ..core.registration.params import RegistrationParams
 
     params = RegistrationParams()
-    if args.edge_angle is not None:
-        params.edge_angle_deg = float(args.edge_angle)
-    if args.no_flying_filter:
-        params.flying_filter = False
-    if args.remove_flying:
-        params.flying_repair = False
-    if args.flying_jump is not None:
-        params.flying_jump_rel = float(args.flying_jump)
-    if args.no_fill_holes:
-        params.fill_holes = False
-    if args.no_denoise:
-        params.denoise = False
-    if args.denoise_size is not None:
-        params.denoise_size = args.denoise_size
-    if args.mixed_radius is not None:
-        params.mixed_radius_px = float(args.mixed_radius)
+    for opt, (field, kind) in _VALUE_OPTIONS.items():
+        if getattr(args, opt) is not None:
+            setattr(params, field, kind(getattr(args, opt)))
+    for opt, field in _OFF_SWITCHES.items():
+        if getattr(args, opt):
+            setattr(params, field, False)
     return params.validate(OPTION_NAMES)
 
 
