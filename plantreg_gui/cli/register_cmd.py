@@ -47,7 +47,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def add_output_options(p: argparse.ArgumentParser) -> None:
     """The output options ``plantreg register`` and ``plantreg batch`` share."""
-    # the parts are core.export.OUTPUT_PARTS; not listed here: importing it would slow every --help by 0.3 s
+    # the parts are core.export.export.OUTPUT_PARTS; not listed here: importing it would slow every --help
     p.add_argument("--outputs", default=None, metavar="PARTS",
                    help="comma-separated parts of the output to write, e.g. registered,cases,ply (default: "
                    "all; an unknown name lists every part)")
