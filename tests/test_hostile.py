@@ -706,7 +706,7 @@ def test_forged_headers_refused_under_a_memory_limit(tmp_path):
     _png_bomb(tmp_path / "d.png")
     code = textwrap.dedent(f"""
         import resource, sys
-        from plantreg_gui.core.imageio import read_image
+        from plantreg_gui.core.io.imageio import read_image
         from plantreg_gui.core.errors import InputError
         import tifffile, spectral.io.envi, PIL.Image
         used = int(open("/proc/self/statm").read().split()[0]) * resource.getpagesize()
@@ -802,7 +802,7 @@ def test_unprivileged_user_permission_errors():
         os.chmod(writable, 0o777)
         code = _DROP + textwrap.dedent(f"""
             import sys
-            from plantreg_gui.core.imageio import read_image
+            from plantreg_gui.core.io.imageio import read_image
             from plantreg_gui.core.errors import InputError
             from plantreg_gui.cli import main
             for f in ("{rec}/hs.hdr",):
