@@ -55,9 +55,9 @@ def test_landmarks_file_is_valid_for_the_rig():
 
 
 def test_landmarks_agree_with_the_two_eye_readings():
-    """Every landmark comes from two readings that agree (tools/finalize.py) and lies a few pixels
+    """Every landmark comes from two readings that agree (landmark_scripts/finalize.py) and lies a few pixels
     inside the read feature (the inward step onto valid depth)."""
-    ann = json.loads((RES / "tools" / "annotations.json").read_text())
+    ann = json.loads((RES / "landmark_scripts" / "annotations.json").read_text())
     for items in ann.values():
         for it in items:
             step = np.linalg.norm(np.subtract(it["ir"], it["feature_ir"]))
@@ -92,7 +92,7 @@ def test_landmarks_sit_on_valid_plant_depth_and_the_fitted_rig_explains_the_hype
 
 
 def test_heldout_landmarks_are_valid_and_were_kept_out_of_the_fit():
-    """landmarks_heldout.json: pairs read after rig.json was fitted (tools/build_landmarks.py writes
+    """landmarks_heldout.json: pairs read after rig.json was fitted (landmark_scripts/build_landmarks.py writes
     the annotations marked "held_out" there); rig.json's fit used landmarks.json alone."""
     rig = Rig.load(RES / "rig_nominal.json")
     held = LandmarkSet.load(RES / "landmarks_heldout.json", rig, check_recordings=True)
