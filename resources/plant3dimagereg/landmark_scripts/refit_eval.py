@@ -175,7 +175,8 @@ def main() -> None:
         fit_on = [t for t in P if (t[0], t[1], t[2].note) not in held]
         out = [t for t in P if (t[0], t[1], t[2].note) in held]
         r = fit(fit_on, start, free)
-        report(f"--free {free} fitted to the {len(fit_on)} pairs (landmarks.json" + (" + the 5 land12 pairs" if land12 else "") + "; in-sample)", residuals(r, fit_on))
+        src = "landmarks.json + the 5 land12 pairs" if land12 else "landmarks.json"
+        report(f"--free {free} fitted to the {len(fit_on)} pairs ({src}; in-sample)", residuals(r, fit_on))
         report(f"  the same rig on the {len(out)} held-out pairs", residuals(r, out))
     elif cmd == "lopo":
         free = sys.argv[2] if len(sys.argv) > 2 else "ir:k1"

@@ -6,10 +6,10 @@ fit: 5 located with its predictions (session land12), 2 read without them (sessi
 ``refit_eval.py check`` splits them by kind).
 
 ``compare [WAY ...]``: on all 31 landmarks (``landmarks.json`` + the 5 land12 pairs of
-``landmarks_heldout.json``, see ``heldout_landmarks``; env LANDMARKS=FILE for one file), for each way of fitting, the fitted residuals and two held-out measures
-per camera — leave-one-plant-out (LOPO: the plant's landmarks of every camera left out of the fit)
-and, for the thermal camera, leave-one-landmark-out (LOLO: one thermal landmark left out at a
-time, everything else in). Ways of fitting:
+``landmarks_heldout.json``, see ``heldout_landmarks``; env LANDMARKS=FILE for one file), for each
+way of fitting, the fitted residuals and two held-out measures per camera — leave-one-plant-out
+(LOPO: the plant's landmarks of every camera left out of the fit) and, for the thermal camera,
+leave-one-landmark-out (LOLO: one thermal landmark left out at a time, everything else in). Ways of fitting:
 
 * ``joint FREE``: one ``plantreg fit-rig --free FREE`` over all landmarks (what
   ``fit_and_check.sh`` does with ``landmarks.json``);
