@@ -16,7 +16,7 @@ import pytest
 from plantreg_gui.core.calibration import Board, Session, detect_image, detect_session, read_truth
 from plantreg_gui.core.calibration.detect import detect_views, to_scalar
 from plantreg_gui.core.errors import Cancelled, InputError
-from plantreg_gui.core.imageio import read_image
+from plantreg_gui.core.io.imageio import read_image
 from plantreg_gui.core.progress import Reporter
 
 from test_calibration_detect import CAM, _pose, _render

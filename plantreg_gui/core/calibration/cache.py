@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import PlantregError
-from ..imageio import atomic_write_text
+from ..io.imageio import atomic_write_text
 from .detect import DETECT_VERSION, Detection, DetectOptions
 
 CACHE_FILE = "detections.json"

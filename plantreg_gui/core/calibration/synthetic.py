@@ -28,12 +28,12 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ..camera import Camera
-from ..imageio import atomic_output_dir, atomic_write_text, write_png, write_tiff
+from ..camera.camera import Camera
+from ..io.imageio import atomic_output_dir, atomic_write_text, write_png, write_tiff
 from ..progress import Reporter, ensure_reporter
-from ..rig import Rig
+from ..camera.rig import Rig
 from .board import Board
-from .. import modality as _modality
+from ..camera import modality as _modality
 from .session import SESSION_FILE
 
 TRUTH_FILE = "truth.json"
@@ -382,7 +382,7 @@ COUNTS_PER_K = 100.0
 def _write(path: Path, img: np.ndarray) -> None:
     s = path.suffix.lower()
     if s in (".pgm", ".ppm", ".bmp"):
-        from ..imageio import atomic_path
+        from ..io.imageio import atomic_path
 
         out = cv2.cvtColor(img, cv2.COLOR_RGB2BGR) if img.ndim == 3 else img
         with atomic_path(path) as tmp:

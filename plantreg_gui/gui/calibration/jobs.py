@@ -11,7 +11,7 @@ import numpy as np
 
 from ...core.calibration import calibrate, calibrated_rig, error_tables
 from ...core.calibration.detect import detect_views, detection_summary
-from ...core.process_job import run_in_process
+from ...core.jobs.process_job import run_in_process
 from ...core.progress import Reporter, ensure_reporter
 
 Key = tuple[str, str]
@@ -50,7 +50,7 @@ def _detect_list(session, todo: list[Key], options: dict | None, progress: Repor
 
 def calibrate_job(session, detections: dict, excluded: set[Key], progress: Reporter | None = None):
     """The calibration, in the worker process: its bundle adjustment loops in Python and would
-    hold the GIL against the GUI thread for seconds (see :mod:`~plantreg_gui.core.process_job`)."""
+    hold the GIL against the GUI thread for seconds (see :mod:`~plantreg_gui.core.jobs.process_job`)."""
     return run_in_process(calibrate, session, detections, excluded, progress=progress)
 
 
