@@ -24,7 +24,7 @@ from test_calibration_detect import CAM, _pose, _render
 
 def _rgb_thermal_rig():
     from plantreg_gui.core.calibration.synthetic import example_rig
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
 
     full = example_rig()
     return Rig([full.camera("rgb"), full.camera("thermal")], None, 0.001, full.roi_min, full.roi_max)
@@ -150,7 +150,7 @@ def test_large_image_is_detected_downscaled_and_refined_at_full_size():
 def _small_session(tmp_path: Path) -> Session:
     from plantreg_gui.core.calibration import write_calibration_session
     from plantreg_gui.core.calibration.synthetic import example_rig
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
 
     full = example_rig()
     rig = Rig([full.camera("hyperspectral")], None, 0.001, full.roi_min, full.roi_max)
@@ -185,7 +185,7 @@ def test_detections_are_cached_and_invalidated(tmp_path, monkeypatch):
 
 
 def test_read_only_session_detects_without_cache(tmp_path, monkeypatch):
-    import plantreg_gui.core.calibration.cache as cache_mod
+    import plantreg_gui.core.calibration.detect as cache_mod
 
     s = _small_session(tmp_path)
 

@@ -17,6 +17,9 @@
 
 The truth (rig, board poses ``R_rig_board``/``t_rig_board``, ToF bias per pose) is written to
 ``truth.json`` beside ``session.json``; :class:`~.session.Session` ignores it.
+
+Length: the renderer, the board poses and the per-modality shading (the lamp-heated thermal board
+among them) share the ray tables and the random stream of one session.
 """
 
 from __future__ import annotations
