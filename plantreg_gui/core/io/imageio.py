@@ -213,15 +213,20 @@ def _read_png_jpeg(path: Path, suffix: str) -> Callable[[], np.ndarray]:
                 raise
             except Exception:  # noqa: BLE001 - no imagecodecs, or a bad file: OpenCV's decoder says what is wrong
                 pass
-        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise InputError(f"corrupt or truncated {kind} file (OpenCV cannot decode it)", path)
-        if img.ndim == 3 and img.shape[2] == 3:
-            img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-        elif img.ndim == 3 and img.shape[2] == 4:
-            img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGBA)
-        return img
+        return _opencv_decode(path, kind)
     return decode
+
+
+def _opencv_decode(path: Path, kind: str) -> np.ndarray:
+    """``cv2.imread`` unchanged, colour as RGB(A); a file it cannot decode is named as corrupt."""
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise InputError(f"corrupt or truncated {kind} file (OpenCV cannot decode it)", path)
+    if img.ndim == 3 and img.shape[2] == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    elif img.ndim == 3 and img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGBA)
+    return img
 
 
 def _read_opencv_still(path: Path, suffix: str) -> Callable[[], np.ndarray]:
@@ -260,14 +265,7 @@ def _read_opencv_still(path: Path, suffix: str) -> Callable[[], np.ndarray]:
                          f"file holds {path.stat().st_size}", path)
 
     def decode() -> np.ndarray:
-        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise InputError(f"corrupt or truncated {kind} file (OpenCV cannot decode it)", path)
-        if img.ndim == 3 and img.shape[2] == 3:
-            img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-        elif img.ndim == 3 and img.shape[2] == 4:
-            img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGBA)
-        return img
+        return _opencv_decode(path, kind)
     return decode
 
 
