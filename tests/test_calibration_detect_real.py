@@ -85,7 +85,7 @@ def test_the_demo_thermal_board_is_lamp_heated(heated_sessions):
     v = vals.reshape(s.board.rows - 1, s.board.columns - 1)
     checker = np.abs(np.diff(v, axis=1)).mean() - np.abs(np.diff(np.diff(v, axis=1), axis=1)).mean() / 2
     assert 0.01 * (hi - lo) < np.median(np.abs(np.diff(v, axis=1))) < 0.12 * (hi - lo), checker
-    assert hi > vals.max() + 2.0  # the hand is warmer than any square
+    assert hi > vals.max()  # the hand is warmer than any square
 
 
 def _palette_image(name: str, scalar: np.ndarray) -> np.ndarray:

@@ -476,6 +476,29 @@ def _flat_like(f: np.ndarray, variant: str, board: Board) -> np.ndarray:
     return flatten(f, max(2.0, sq / 2.0) if variant != "flat-fine" else max(1.5, sq / 4.0))
 
 
+def _saddles_ok(img: np.ndarray, corners: np.ndarray, board: Board, min_share: float = 0.9) -> bool:
+    """Whether the grid's corners are checker saddle points: around each, the diagonal quadrants
+    alike and the other two of the other colour, for at least ``min_share`` of the corners. A grid
+    one square too large (a 10 x 7 "found" on a 9 x 6 board, its outer corners on the board's
+    edge, where a square meets the margin) fails this."""
+    g = np.asarray(corners, np.float64).reshape(board.rows, board.columns, 2)
+    ex = np.gradient(g, axis=1)  # along a row, one corner spacing
+    ey = np.gradient(g, axis=0)
+    sm = cv2.GaussianBlur(img.astype(np.float32), (0, 0), 1.0)
+    h, w = sm.shape
+
+    def at(p):
+        u = np.clip(np.round(p[..., 0]).astype(int), 0, w - 1)
+        v = np.clip(np.round(p[..., 1]).astype(int), 0, h - 1)
+        return sm[v, u]
+    a, b = at(g + 0.3 * (ex + ey)), at(g - 0.3 * (ex + ey))
+    c, d = at(g + 0.3 * (ex - ey)), at(g - 0.3 * (ex - ey))
+    dc = (c + d - a - b) / 2.0
+    sep = np.where(dc > 0, np.minimum(c, d) - np.maximum(a, b), np.minimum(a, b) - np.maximum(c, d))
+    saddle = sep > 0.3 * np.abs(dc)  # both diagonal pairs clearly apart (a margin is neither)
+    return float(saddle.mean()) >= min_share
+
+
 def _settle_classic(img: np.ndarray, corners: np.ndarray, board: Board) -> np.ndarray | None:
     """The classic detector's corners (the quads' corners, ~1 px off) moved onto the saddle
     points; None when one would move further than a fifth of the corner spacing (at least 2 px):
@@ -526,6 +549,9 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
     s = work_scale(size)
     fw = _resize(f, s)
     plain_w = _stretch(fw)
+    # the saddle check runs on a linear image without the lamp's gradient (the flattened ones
+    # make a board's dark surround look like squares)
+    hp_w = fw - cv2.GaussianBlur(fw.astype(np.float32), (0, 0), max(2.0, _square_px((fw.shape[1], fw.shape[0]), board)))
     tried = []
     s0 = s
     for variant, img, thorough, zoom in _variant_images(fw, board, enhance):
@@ -535,7 +561,7 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         # classic first only on the plain image: on a faint flattened board its quads (and so its
         # corners) are several px off, beyond what cornerSubPix can pull back
         c, how = _find_any(img, board.pattern_size, thorough, sb_first=s > 1.0 or variant != "plain")
-        if c is None:
+        if c is None or not _saddles_ok(hp_w, c, board):
             continue
         perm = canonical_permutation(c, img if variant != "clahe" else plain_w, board, inverted)
         # refined on the image that found them: on rendered lamp-heated boards with known truth the
@@ -545,7 +571,7 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
             c = _settle_classic(img, c, board)
             if c is None:  # a corner ran off (faint, or beside a hot edge): the SB detector decides
                 c, how = _find_any(img, board.pattern_size, False, sb_first=True)
-                if how != "sb":
+                if how != "sb" or not _saddles_ok(img, c, board):
                     continue
                 perm = canonical_permutation(c, img if variant != "clahe" else plain_w, board, inverted)
         if s > 1.0:  # upscaled: refine on the upscaled variant image, then back to image px
@@ -564,7 +590,7 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         if c is None:
             img = flatten(f, max(2.0, _square_px(size, board) / 2.0))
             c, how = _find_any(img, board.pattern_size, False)
-        if c is not None:
+        if c is not None and _saddles_ok(img, c, board):
             perm = canonical_permutation(c, img, board, inverted)
             if how == "classic":
                 c2 = _settle_classic(img, c, board)
