@@ -240,5 +240,6 @@ def test_depth_table_is_near_zero_without_tof_bias(tmp_path):
                 limit = 0.5 if "thermal" in (o, t) else 0.25
                 assert out[0.0].depth[o][t]["px"] < limit, (o, t, out[0.0].depth[o][t])
                 assert out[6.0].depth[o][t]["px"] > out[0.0].depth[o][t]["px"]
-    assert all(abs(b) < 0.5 for b in out[0.0].depth_bias_mm.values())
-    assert all(abs(b - 6.0) < 0.5 for b in out[6.0].depth_bias_mm.values())
+    # within 1 mm: the board poses are estimated jointly with the lamp-heated thermal camera
+    assert all(abs(b) < 1.0 for b in out[0.0].depth_bias_mm.values()), out[0.0].depth_bias_mm
+    assert all(abs(b - 6.0) < 1.0 for b in out[6.0].depth_bias_mm.values()), out[6.0].depth_bias_mm
