@@ -140,7 +140,7 @@ class CalibrationReport:
                 unit = ("deg" if k == "rotation_deg" else "mm" if k == "translation_mm"
                         else "px" if k in ("fx", "fy", "cx", "cy") else "")
                 v = vals.get(k)
-                w.writerow([c, k, "" if v is None else f"{v:.6g}", f"{sd:.4g}", unit])
+                w.writerow([c, k, "" if v is None else f"{v:.6g}", f"{sd:.4g}" if sd > 0 else "fixed", unit])
             ps = u.get("projection_sigma_px", {})
             for k in ("median", "worst", "rig_median", "rig_worst"):
                 if k in ps:
@@ -333,8 +333,9 @@ def error_tables(session: Session, calibration: Calibration, detections: dict[tu
                    "normalization": norm[c], "modality": session.cameras[c]} for c in cams}
     weak = [{"pose": p, "camera": c, "px": e, "reason": r} for p, c, e, r in cal.weak_views]
     return CalibrationReport(intrinsic, extrinsic, depth, {"intrinsic": v_intr, "extrinsic": v_ext, "depth": v_depth},
-                             bias_mm, bias, cameras, weak, sorted(view_key(p, c) for p, c in excluded), warn,
-                             uncertainty_dict(cal), list(getattr(cal, "accepted_uncertain", [])))
+                             bias_mm, bias, cameras, weak, sorted(view_key(p, c) for p, c in excluded), warnings=warn,
+                             uncertainty=uncertainty_dict(cal),
+                             accepted_uncertain=list(getattr(cal, "accepted_uncertain", [])))
 
 
 def uncertainty_dict(cal: Calibration) -> dict[str, dict[str, Any]]:
