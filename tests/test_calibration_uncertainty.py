@@ -29,12 +29,13 @@ def _session(seed: int, coverage: str, n_cams: int = 3, board=None, n_poses=None
 
 
 def test_projection_uncertainty_covers_the_true_error():
-    """On 21 sessions (boards all over the image, in its centre only, and fronto-parallel; 3
-    cameras each; noise 0.1-0.3 px) the true projection error lies within the reported 2 sigma
-    in 90-98 % of the image points, for the lens model alone and for the camera in the rig."""
+    """On 22 sessions (boards all over the image or in its centre only; 3 cameras each; 12-20
+    poses; noise 0.1-0.3 px) the true projection error lies within the reported 2 sigma in 90-98 %
+    of the image points, for the lens model alone and for the camera in the rig. (Fronto-parallel
+    sessions: see the refusal tests.)"""
     inside_i, inside_r = [], []
-    for k, seed in enumerate(range(100, 121)):
-        rig, s, dets, _ = _session(seed, ("spread", "centre", "fronto")[k % 3])
+    for k, seed in enumerate(range(100, 122)):
+        rig, s, dets, _ = _session(seed, ("spread", "centre")[k % 2])
         cal = calibrate(s, dets)
         for cam in s.cameras:
             e_i, s_i, e_r, s_r = true_projection_errors(cal, rig, cam)
