@@ -571,7 +571,7 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
                 weak.append((p, e, f"error {e:.3f} px is {e / med:.1f}x the median {med:.3f} px"))
         weak.sort(key=lambda w: (-("disagrees" in w[2]), -w[1]))
         w, h = sizes[cam]
-        used_uv = np.concatenate([views[cam][p].corners for p in views[cam] if (p, cam) not in outliers]).astype(float)
+        used_uv = [views[cam][p].corners.astype(float) for p in views[cam] if (p, cam) not in outliers]
         dists = [float(np.linalg.norm(init[p][1])) for p in views[cam] if (p, cam) not in outliers]
         unc[cam] = projection_uncertainty(cam, K, dist, R, t, ba.cov[cam], ba.names[cam], (w, h),
                                           float(np.median(dists)), used_uv, cam == ref)

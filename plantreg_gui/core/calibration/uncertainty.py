@@ -57,7 +57,7 @@ class CameraUncertainty:
     unitless for distortion; rotation in deg as "rotation_deg" and translation in mm as
     "translation_mm" for non-reference cameras); ``grid_u``/``grid_v`` (W,) and (H,) pixel
     centres of the grid; ``sigma_intrinsics``/``sigma_rig`` (H, W) px; ``corners`` (H, W)
-    number of used corners in each cell; ``distance_m`` the working distance."""
+    number of used board views covering each cell; ``distance_m`` the working distance."""
 
     name: str
     std: dict[str, float]
@@ -81,7 +81,7 @@ class CameraUncertainty:
 
     @property
     def covered_worst(self) -> float:
-        """Worst projection uncertainty (px) over the grid cells holding board corners."""
+        """Worst projection uncertainty (px) over the grid cells some board view covered."""
         m = self.corners > 0
         return float(np.max(self.sigma_intrinsics[m])) if m.any() else float("inf")
 
@@ -128,10 +128,11 @@ def _worst_direction(S: np.ndarray) -> np.ndarray:
 
 def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig: np.ndarray,
                            t_cam_rig: np.ndarray, cov: np.ndarray, param_names: list[str], size: tuple[int, int],
-                           distance_m: float, corners_uv: np.ndarray, is_reference: bool) -> CameraUncertainty:
+                           distance_m: float, views_uv: list[np.ndarray], is_reference: bool) -> CameraUncertainty:
     """The uncertainty of one camera (see the module docstring). ``cov`` (n, n) of the
     parameters ``param_names`` (fx, fy, cx, cy, dist..., rx, ry, rz, tx, ty, tz);
-    ``corners_uv`` (M, 2) every used corner (for the coverage map)."""
+    ``views_uv`` [(N, 2)] the used corners of each view (for the coverage map: the number of
+    views whose board, the corners' convex hull, covers each grid cell)."""
     w, h = size
     nd = len(dist)
     gu, gv = _grid(w, h)
@@ -162,12 +163,15 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
     k = int(np.argmax(sig_i.ravel()))
     contrib = [float(Ji[k, :, j] @ Ji[k, :, j]) * var[j] for j in range(4 + nd)]
     worst = param_names[int(np.argmax(contrib))] if max(contrib) > 0 else ""
-    # coverage: used corners per grid cell
+    # coverage: views whose board covers each grid cell's centre
     cnt = np.zeros((len(gv), len(gu)))
-    if len(corners_uv):
-        iu = np.clip((corners_uv[:, 0] + 0.5) * len(gu) / w, 0, len(gu) - 1).astype(int)
-        iv = np.clip((corners_uv[:, 1] + 0.5) * len(gv) / h, 0, len(gv) - 1).astype(int)
-        np.add.at(cnt, (iv, iu), 1)
+    for c in views_uv:
+        if len(c) < 3:
+            continue
+        hull = cv2.convexHull(np.asarray(c, np.float32).reshape(-1, 1, 2)).reshape(-1, 2)
+        inside = np.array([cv2.pointPolygonTest(hull.reshape(-1, 1, 2), (float(a), float(b)), False) >= 0
+                           for a, b in uv]).reshape(cnt.shape)
+        cnt += inside
     # "add views here": regions holding the highest uncertainty, fewest corners first
     add = []
     order = np.argsort(-sig_i.ravel())

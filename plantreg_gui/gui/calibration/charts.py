@@ -294,8 +294,8 @@ def _sigma_colour(ratio: float) -> QColor:
 class UncertaintyMap(_Chart):
     """Projection uncertainty heat map per camera (mrcal-style): each grid cell coloured by its
     standard deviation (px) relative to the camera's limit, cells where no board corner was seen
-    hatched, the cells that would gain most from more views outlined, the value written where
-    the cell is big enough. One panel per camera."""
+    hatched, the three least certain cells outlined, the value written where the cell is big
+    enough. One panel per camera, laid out in as many columns as make them largest."""
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent, min_height=180)
@@ -315,11 +315,18 @@ class UncertaintyMap(_Chart):
         small = self._small()
         p.setFont(small)
         n = len(self._maps)
-        cols = n if n <= 2 else 2
-        rows = math.ceil(n / cols)
         W, H = self.width(), self.height()
-        cw, ch = W / cols, H / rows
         fm = p.fontMetrics()
+        title_h0 = 2 * fm.height() + 14
+        aspect0 = float(np.median([m.get("aspect", 4 / 3) for m in self._maps]))
+
+        def size(c: int) -> float:  # panel width with ``c`` columns
+            r = math.ceil(n / c)
+            return min(W / c - 16, (H / r - title_h0) * aspect0)
+
+        cols = max(range(1, n + 1), key=size)
+        rows = math.ceil(n / cols)
+        cw, ch = W / cols, H / rows
         for k, m in enumerate(self._maps):
             x0, y0 = (k % cols) * cw, (k // cols) * ch
             sig = np.asarray(m["sigma"], float)
@@ -335,7 +342,7 @@ class UncertaintyMap(_Chart):
             p.drawText(QRectF(x0 + 4, y0 + 2, cw - 8, title_h), Qt.AlignmentFlag.AlignLeft | Qt.TextFlag.TextWordWrap,
                        m["title"])
             lim = float(m["limit"])
-            worst = set(np.argsort(-sig.ravel())[: max(1, sig.size // 12)].tolist())
+            worst = set(np.argsort(-sig.ravel())[:3].tolist())
             sx, sy = pw / gw, ph / gh
             for i in range(gh):
                 for j in range(gw):

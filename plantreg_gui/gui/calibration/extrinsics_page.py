@@ -69,8 +69,8 @@ class ExtrinsicsPage(WizardPage):
         if cal is not None:
             rig = cal.rig
             self.poses.clear()
-            cols = ["camera", "x mm", "y mm", "z mm", "rotation °", "distance mm", "± rotation °", "± translation mm",
-                    "uncertainty in the rig px (median / worst)"]
+            cols = ["camera", "x mm", "y mm", "z mm", "rotation °", "distance mm", "± rot. °", "± transl. mm",
+                    "σ in rig px (median / worst)"]
             unc = results.uncertainty(cal)
             self.poses.setColumnCount(len(cols))
             self.poses.setHorizontalHeaderLabels(cols)
