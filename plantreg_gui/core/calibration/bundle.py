@@ -139,7 +139,7 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
                   obs: list[tuple[str, str, np.ndarray, np.ndarray]], progress: Reporter | None = None,
                   f_scale: float | None = None, max_iter: int = 50, noise_px: float | None = None,
                   covariance: bool = True, tol: float = 1e-10,
-                  noise: dict[str, float] | None = None) -> BundleResult:
+                  noise: dict[str, float] | None = None, gauss_newton: bool = False) -> BundleResult:
     """Fit all cameras and board poses to ``obs`` [(pose, cam, obj (N, 3), img (N, 2))].
 
     ``init_board`` pose -> (R_rig_board, t_rig_board). Rotations are updated multiplicatively
@@ -150,7 +150,9 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
     to weigh priors against corners (default: the start RMS). ``noise`` camera -> corner noise
     (px per coordinate): each camera's residuals are weighed by it (maximum likelihood when the
     cameras' detectors differ, e.g. a 4K camera and a thermal one); then ``f_scale`` is in units
-    of that noise (default 3) and the covariance's residual variance is of the weighed residuals."""
+    of that noise (default 3) and the covariance's residual variance is of the weighed residuals.
+    ``gauss_newton``: take ``max_iter`` undamped steps without checking the cost (a refit from a
+    nearby solution, as in cross-validation: half the work)."""
     progress = ensure_reporter(progress)
     nd = {c: len(blocks[c].dist) for c in cams}
     names = {c: param_names(nd[c]) for c in cams}
@@ -312,7 +314,7 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
     res, A, B, C, ga, gb = evaluate(intr, Rc, tc, Rb, tb, True, fs)
     add_prior(A, ga, intr)
     f = total_cost(res, intr)
-    lam = 1e-5
+    lam = 1e-12 if gauss_newton else 1e-5
     it = 0
     for it in range(1, max_iter + 1):
         progress.check()
@@ -323,6 +325,11 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
             lam *= 10.0
             continue
         cand = apply(dc, db)
+        if gauss_newton:
+            intr, Rc, tc, Rb, tb = cand
+            res, A, B, C, ga, gb = evaluate(intr, Rc, tc, Rb, tb, True, fs)
+            add_prior(A, ga, intr)
+            continue
         res_new = evaluate(*cand, False, fs)[0]
         f_new = total_cost(res_new, cand[0])
         if np.isfinite(f_new) and f_new <= f:

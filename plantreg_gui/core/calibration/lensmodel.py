@@ -116,7 +116,7 @@ def _sq_errors(obj, img, K, dist, init=None) -> np.ndarray:
 
 def fit_camera(obj: list[np.ndarray], img: list[np.ndarray], model: LensModel, K0: np.ndarray,
                dist0: np.ndarray, poses0: list[tuple[np.ndarray, np.ndarray]], max_iter: int = 50,
-               tol: float = 1e-10, size: tuple[int, int] | None = None):
+               tol: float = 1e-10, size: tuple[int, int] | None = None, gauss_newton: bool = False):
     """Fit one camera's ``model`` to its views (``obj`` [(N, 3)], ``img`` [(N, 2)]) from a start
     (``poses0`` [(R_cam_board, t_cam_board)]) by the bundle adjustment (:mod:`.bundle`) with
     this camera alone. Returns (rms px, K, dist (nd,), poses [(R, t)])."""
@@ -124,7 +124,8 @@ def fit_camera(obj: list[np.ndarray], img: list[np.ndarray], model: LensModel, K
                       fixed=set(model.fixed), prior=principal_point_prior(size) if size else {})
     init = {f"{i:05d}": (np.asarray(R, float), np.asarray(t, float).ravel()) for i, (R, t) in enumerate(poses0)}
     obs = [(f"{i:05d}", "c", o, m) for i, (o, m) in enumerate(zip(obj, img))]
-    r = bundle_adjust(["c"], "c", {"c": blk}, init, obs, max_iter=max_iter, covariance=False, tol=tol)
+    r = bundle_adjust(["c"], "c", {"c": blk}, init, obs, max_iter=max_iter, covariance=False, tol=tol,
+                      gauss_newton=gauss_newton)
     K, dist, _R, _t = r.cams["c"]
     return r.rms_px, K, dist, [r.boards[f"{i:05d}"] for i in range(len(obj))]
 
@@ -193,7 +194,7 @@ def choose_model(name: str, obj: list[np.ndarray], img: list[np.ndarray], size: 
             train = [i for i in range(n) if i not in held]
             try:
                 _r, Kf, df, _p = fit_camera([obj[i] for i in train], [img[i] for i in train], m, K_all, d_all,
-                                            [p_all[i] for i in train], max_iter=4, tol=1e-6, size=size)
+                                            [p_all[i] for i in train], max_iter=3, size=size, gauss_newton=True)
                 for i in f:
                     mse[i] = float(np.mean(_sq_errors(obj[i], img[i], Kf, df, p_all[i])))
             except (np.linalg.LinAlgError, cv2.error):

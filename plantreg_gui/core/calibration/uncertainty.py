@@ -165,13 +165,14 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
     worst = param_names[int(np.argmax(contrib))] if max(contrib) > 0 else ""
     # coverage: views whose board covers each grid cell's centre
     cnt = np.zeros((len(gv), len(gu)))
+    scale = np.array([len(gu) / w, len(gv) / h])
     for c in views_uv:
         if len(c) < 3:
             continue
         hull = cv2.convexHull(np.asarray(c, np.float32).reshape(-1, 1, 2)).reshape(-1, 2)
-        inside = np.array([cv2.pointPolygonTest(hull.reshape(-1, 1, 2), (float(a), float(b)), False) >= 0
-                           for a, b in uv]).reshape(cnt.shape)
-        cnt += inside
+        m = np.zeros(cnt.shape, np.uint8)  # the hull rasterised at the grid's resolution
+        cv2.fillConvexPoly(m, np.round(((hull + 0.5) * scale - 0.5) * 16).astype(np.int32), 1, cv2.LINE_8, 4)
+        cnt += m
     # "add views here": regions holding the highest uncertainty, fewest corners first
     add = []
     order = np.argsort(-sig_i.ravel())
