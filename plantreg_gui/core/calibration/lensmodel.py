@@ -34,9 +34,9 @@ CV_FOLDS = 5
 #: the principal point's prior: the image centre, with this standard error as a fraction of the
 #: image diagonal (about the spread of real cameras' principal points)
 PP_PRIOR_FRAC = 0.02
-#: a richer model must predict held-out views better by this many standard errors of the
-#: (paired) difference to be chosen over a simpler one
-CV_SE = 2.0
+#: a richer model is chosen only if it predicts held-out views better by more than this
+#: fraction (cross-validated RMS error)
+CV_TOLERANCE = 0.03
 
 
 def principal_point_prior(size: tuple[int, int]) -> dict[str, tuple[float, float]]:
@@ -210,16 +210,10 @@ def choose_model(name: str, obj: list[np.ndarray], img: list[np.ndarray], size: 
                            skipped), fits[m.name]
     best_m = min(scored, key=lambda m: cv_px[m.name])
     best = cv_px[best_m.name]
-    chosen, se_chosen = best_m, 0.0
-    for m in scored:
-        d = per_view[m.name] - per_view[best_m.name]
-        se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else 0.0
-        if float(np.mean(d)) <= CV_SE * se:
-            chosen, se_chosen = m, se
-            break
+    chosen = next(m for m in scored if cv_px[m.name] <= best * (1.0 + CV_TOLERANCE))
     if chosen is best_m:
         reason = f"predicts held-out views best ({cv_px[chosen.name]:.3f} px)"
     else:
-        reason = (f"predicts held-out views as well as the best within {CV_SE:g} standard errors "
+        reason = (f"predicts held-out views within {100 * CV_TOLERANCE:g} % of the best "
                   f"({cv_px[chosen.name]:.3f} px vs {best:.3f} px for {best_m.label}) with fewer parameters")
     return ModelChoice(chosen, cv_px, fit_px, k, reason, skipped), fits[chosen.name]

@@ -178,9 +178,10 @@ class PerViewChart(_Chart):
             used, ex = self.bars.get(cam, {}), self.excluded_bars.get(cam, {})
             weak = self._weak.get(cam, set())
             m = self._mean.get(cam)
-            title = f"{cam}: per-view reprojection error"
+            # short: with the uncertainty map beside it a panel is ~300 px wide
+            title = f"{cam}: error per view"
             if m is not None and math.isfinite(m):
-                title += f" (dashed: mean {m:.3f} px)"
+                title += f" (mean {m:.3f} px, dashed)"
             n_weak = sum(1 for q in poses if q in weak and q in used)
             if n_weak:
                 title += f", {n_weak} weak"
@@ -332,7 +333,7 @@ class UncertaintyMap(_Chart):
             sig = np.asarray(m["sigma"], float)
             cnt = np.asarray(m["corners"])
             gh, gw = sig.shape
-            title_h = 2 * fm.height() + 4
+            title_h = 2 * fm.height() + 6
             aspect = m.get("aspect", gw / gh)
             avail_w, avail_h = cw - 16, ch - title_h - 10
             pw = min(avail_w, avail_h * aspect)

@@ -70,7 +70,7 @@ class ExtrinsicsPage(WizardPage):
             rig = cal.rig
             self.poses.clear()
             cols = ["camera", "x mm", "y mm", "z mm", "rotation °", "distance mm", "± rot. °", "± transl. mm",
-                    "σ in rig px (median / worst)"]
+                    "σ rig px med/worst"]
             unc = results.uncertainty(cal)
             self.poses.setColumnCount(len(cols))
             self.poses.setHorizontalHeaderLabels(cols)
@@ -81,13 +81,15 @@ class ExtrinsicsPage(WizardPage):
                 u = unc.get(c.name)
                 ref = u is None or u.rotation_deg is None
                 rig_sig = u.summary("rig") if u is not None else None
-                vals = [c.name + (" (depth)" if c.name == rig.depth_camera else "") + (" — reference" if ref else ""),
+                tags = [t for t, on in (("depth", c.name == rig.depth_camera), ("reference", ref)) if on]
+                vals = [c.name + (f" ({', '.join(tags)})" if tags else ""),
                         fmt(ctr[0], 1), fmt(ctr[1], 1), fmt(ctr[2], 1), fmt(ang, 2), fmt(np.linalg.norm(ctr), 1),
                         "–" if ref else f"{u.rotation_deg:.3f}", "–" if ref else f"{u.translation_mm:.2f}",
                         f"{rig_sig[0]:.2f} / {rig_sig[1]:.2f}" if rig_sig else "–"]
                 for j, v in enumerate(vals):
                     self.poses.setItem(i, j, item(v, bold=(j == 0)))
             self.poses.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+            self.poses.horizontalHeader().setSectionResizeMode(0, QHeaderView.ResizeMode.ResizeToContents)
             self.poses.resizeRowsToContents()
             h = self.poses.horizontalHeader().height() + sum(self.poses.rowHeight(i) for i in range(len(rig.cameras)))
             self.poses.setFixedHeight(h + 2 * self.poses.frameWidth() + 2)

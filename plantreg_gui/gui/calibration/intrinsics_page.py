@@ -33,7 +33,7 @@ class IntrinsicsPage(WizardPage):
                              "direction). Green: well within the camera's limit; red: at or beyond it. Hatched: no "
                              "board corner was seen there. Outlined: where more board views would shrink it most.")
         lower.addWidget(self.umap)
-        lower.setSizes([600, 500])
+        lower.setSizes([700, 450])
         split.addWidget(lower)
         split.setSizes([200, 560])
         lay.addWidget(split, 1)
