@@ -43,7 +43,7 @@ from ..progress import Reporter, ensure_reporter
 from ..rig import Rig
 from .board import Board
 from .bundle import DIST_NAMES, CameraBlock, bundle_adjust, param_names
-from .lensmodel import ModelChoice, choose_model, principal_point_prior
+from .lensmodel import MODEL_BY_NAME, ModelChoice, choose_model, fit_camera, focal_rel_std, principal_point_prior
 from .uncertainty import (MAX_PROJECTION_SIGMA_COVERED, MAX_PROJECTION_SIGMA_MEDIAN, MAX_ROTATION_SIGMA_DEG,
                           MAX_TRANSLATION_SIGMA_MM,
                           CameraUncertainty, projection_uncertainty, uncertainty_problems)
@@ -57,6 +57,9 @@ MIN_VIEWS = 3
 MAX_RMS_PX = 2.0
 WEAK_FACTOR, WEAK_MIN_EXCESS_PX, WEAK_POSE_DEG = 2.0, 0.1, 1.0
 INCONSISTENT_DEG = 5.0
+#: relative standard error of a camera's focal length from its own views above which its own
+#: views are taken not to determine its lens (placed last, from the board corners in 3D)
+UNDETERMINED_FOCAL = 0.02
 
 
 @dataclass
@@ -196,8 +199,10 @@ def _calibrate_intrinsics(name: str, views: dict[str, Detection], board: Board, 
     poses = sorted(views)
     obj = [_view_points(views[p], board)[0] for p in poses]
     img = [views[p].corners.reshape(-1, 2).astype(np.float64) for p in poses]
-    choice, (rms, K, dist, fitted) = choose_model(name, obj, img, size)
+    choice, fit = choose_model(name, obj, img, size)
+    rms, K, dist, fitted = fit
     board_cam = dict(zip(poses, fitted))
+    choice.focal_rel_std = focal_rel_std(obj, img, choice.model, fit, size)
     return K, dist, board_cam, choice
 
 
@@ -237,6 +242,34 @@ def _per_view_errors(K, dist, views: dict[str, Detection], board: Board,
 
 
 # ---------------------------------------------------------------------- symmetric boards
+def _pnp_pose(d: Detection, board: Board, K: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    obj, img = _view_points(d, board)
+    ok, rv, tv = cv2.solvePnP(obj, img, K, dist)
+    rv, tv = cv2.solvePnPRefineLM(obj, img, K, dist, rv, tv)
+    return cv2.Rodrigues(rv)[0], tv.ravel()
+
+
+def _calibrate_from_3d(cam: str, views: dict[str, Detection], shared: list[str],
+                       board_rig: dict[str, tuple[np.ndarray, np.ndarray]], board: Board,
+                       size: tuple[int, int], choice) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A camera whose own views do not determine its focal length, calibrated from the board
+    corners of the poses already placed in the rig frame: together they are a non-planar target.
+    Returns K, dist (in the chosen model's length), R_cam_rig, t_cam_rig."""
+    X = np.concatenate([_view_points(views[p], board)[0] @ board_rig[p][0].T + board_rig[p][1] for p in shared])
+    uv = np.concatenate([views[p].corners.astype(np.float64) for p in shared])
+    w, h = size
+    f0 = float(np.hypot(w, h))
+    K0 = np.array([[f0, 0, (w - 1) / 2], [0, f0, (h - 1) / 2], [0, 0, 1.0]])
+    model = choice.model if choice is not None else MODEL_BY_NAME["k1k2"]
+    simple = MODEL_BY_NAME["k1k2"]
+    rv, tv = cv2.solvePnP(X, uv, K0, np.zeros(5))[1:]
+    fit = fit_camera([X], [uv], simple, K0, np.zeros(5), [(cv2.Rodrigues(rv)[0], tv.ravel())], size=size)
+    if model is not simple:
+        fit = fit_camera([X], [uv], model, fit[1], fit[2], fit[3], size=size)
+    _rms, K, dist, poses = fit
+    return K, dist, poses[0][0], poses[0][1]
+
+
 def flip_pose(board: Board, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The board pose (R_x_board (3, 3), t (3,)) of a detection whose corner order is reversed
     (the board turned by 180 degrees about its centre's normal): corner k of the reversed order
@@ -460,9 +493,15 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
     # board poses already known in the rig frame; for a symmetric board each view's two corner
     # orders are both tried and the one consistent with the rig kept
     symmetric = board.is_symmetric
-    placed: dict[str, tuple[np.ndarray, np.ndarray]] = {ref: (np.eye(3), np.zeros(3))}
+    # placement starts at the camera whose own views determine its lens best (the reference's may
+    # not: e.g. boards all facing it); cameras whose own views leave their focal length undetermined
+    # come last, calibrated from the board corners already placed in 3D (not planar any more)
+    rel = {c: (0.0 if c in known else getattr(intr[c][3], "focal_rel_std", 0.0)) for c in cams}
+    weak_f = {c for c in cams if not rel[c] <= UNDETERMINED_FOCAL}
+    anchor = min(cams, key=lambda c: (rel[c], c != ref))
+    placed: dict[str, tuple[np.ndarray, np.ndarray]] = {anchor: (np.eye(3), np.zeros(3))}
     flipped: set[tuple[str, str]] = set()
-    board_rig: dict[str, tuple[np.ndarray, np.ndarray]] = {p: intr[ref][2][p] for p in views[ref]}
+    board_rig: dict[str, tuple[np.ndarray, np.ndarray]] = {p: intr[anchor][2][p] for p in views[anchor]}
 
     def own(cam, p):
         R, t = intr[cam][2][p]
@@ -470,7 +509,7 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
 
     while len(placed) < len(cams):
         todo = [c for c in cams if c not in placed]
-        b = max(todo, key=lambda c: len(set(views[c]) & set(board_rig)))
+        b = max(todo, key=lambda c: (c not in weak_f, len(set(views[c]) & set(board_rig))))
         shared = sorted(set(views[b]) & set(board_rig))
         if not shared:
             c = todo[0]
@@ -479,25 +518,33 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
                 f"camera '{c}' shares no board pose with {', '.join(sorted(placed))}: it saw the board in "
                 f"{', '.join(sorted(views[c]))}, the others in {', '.join(others)}. Record poses in which "
                 f"'{c}' and another camera see the board at the same time", session.folder)
-        cands = []
-        for p in shared:
-            R_rb, t_rb = board_rig[p]
-            for f in ((0, 1) if symmetric else (0,)):
-                R_bb, t_bb = intr[b][2][p]
+        if b in weak_f and len(weak_f) < len(cams) and not symmetric:
+            K, dist, R_b, t_b = _calibrate_from_3d(b, views[b], shared, board_rig, board, sizes[b], intr[b][3])
+            intr[b] = (K, dist, {p: _pnp_pose(views[b][p], board, K, dist) for p in views[b]}, intr[b][3])
+            placed[b] = (R_b, t_b)
+        else:
+            cands = []
+            for p in shared:
+                R_rb, t_rb = board_rig[p]
+                for f in ((0, 1) if symmetric else (0,)):
+                    R_bb, t_bb = intr[b][2][p]
+                    if f:
+                        R_bb, t_bb = flip_pose(board, R_bb, t_bb)
+                    R_b_rig = R_bb @ R_rb.T
+                    cands.append((p, f, R_b_rig, t_bb - R_b_rig @ t_rb))
+            chosen = _consensus(cands)
+            for p, (f, _R, _t) in chosen.items():
                 if f:
-                    R_bb, t_bb = flip_pose(board, R_bb, t_bb)
-                R_b_rig = R_bb @ R_rb.T
-                cands.append((p, f, R_b_rig, t_bb - R_b_rig @ t_rb))
-        chosen = _consensus(cands)
-        for p, (f, _R, _t) in chosen.items():
-            if f:
-                flipped.add((p, b))
-        placed[b] = _medoid_pose([(R, t) for _f, R, t in chosen.values()])
+                    flipped.add((p, b))
+            placed[b] = _medoid_pose([(R, t) for _f, R, t in chosen.values()])
         Rb, tb = placed[b]
         for p in views[b]:
             if p not in board_rig:
                 R_bb, t_bb = own(b, p)
                 board_rig[p] = (Rb.T @ R_bb, Rb.T @ (t_bb - tb))
+    if anchor != ref:  # express everything in the reference camera's frame
+        R_ref, t_ref = placed[ref]
+        placed = {c: (R @ R_ref.T, t - R @ R_ref.T @ t_ref) for c, (R, t) in placed.items()}
     progress(0.35, "initial extrinsics")
 
     # board poses in the rig frame: the medoid of what the cameras that saw the pose say. A view

@@ -130,6 +130,22 @@ def fit_camera(obj: list[np.ndarray], img: list[np.ndarray], model: LensModel, K
     return r.rms_px, K, dist, [r.boards[f"{i:05d}"] for i in range(len(obj))]
 
 
+def focal_rel_std(obj: list[np.ndarray], img: list[np.ndarray], model: LensModel, fit: tuple,
+                  size: tuple[int, int]) -> float:
+    """Relative standard error of fx of a camera fitted to its own views alone (``fit`` from
+    :func:`choose_model`): how well its views determine its own focal length (fronto-parallel
+    views, or boards tilted about one axis only, leave it undetermined)."""
+    _rms, K, dist, poses = fit
+    blk = CameraBlock(np.asarray(K, float), _dist_vector(dist, model.nd), np.eye(3), np.zeros(3),
+                      fixed=set(model.fixed), prior=principal_point_prior(size))
+    init = {f"{i:05d}": (np.asarray(R, float), np.asarray(t, float).ravel()) for i, (R, t) in enumerate(poses)}
+    obs = [(f"{i:05d}", "c", np.asarray(o, float).reshape(-1, 3), np.asarray(m, float).reshape(-1, 2))
+           for i, (o, m) in enumerate(zip(obj, img))]
+    r = bundle_adjust(["c"], "c", {"c": blk}, init, obs, max_iter=0)
+    sd = float(np.sqrt(max(r.cov["c"][0, 0], 0.0)))
+    return sd / max(abs(float(K[0, 0])), 1e-9)
+
+
 def choose_model(name: str, obj: list[np.ndarray], img: list[np.ndarray], size: tuple[int, int],
                  candidates: tuple[LensModel, ...] = MODELS, rng_seed: int = 0) -> tuple[ModelChoice, tuple]:
     """Cross-validate ``candidates`` (nested, simplest first) on one camera's views (``obj``
