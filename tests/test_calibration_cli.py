@@ -90,6 +90,20 @@ def test_known_intrinsics_from_a_rig_file(stereo_run, shared_data, tmp_path, cap
     sd = full.extra["calibration"]["cameras"]["left"]["uncertainty"]["std"]
     assert abs(rig.camera("left").K[0, 0] - full.camera("left").K[0, 0]) < 3 * sd["fx"]
     assert rig.extra["calibration"]["cameras"]["left"]["lens_model"]["model"] == "given"
+    # the same from session.json ("intrinsics" in the camera's entry), kept when the session is saved
+    from plantreg_gui.core.calibration import Session
+
+    meta = json.loads((s / "session.json").read_text())
+    meta["cameras"]["left"]["intrinsics"] = str(out / "rig.json")
+    (s / "session.json").write_text(json.dumps(meta))
+    Session.load(s).save()
+    assert json.loads((s / "session.json").read_text())["cameras"]["left"]["intrinsics"] == str(out / "rig.json")
+    code = main(["calibrate", str(s), "--out", str(tmp_path / "r2.json"), "--report", str(tmp_path / "rep2.json"),
+                 "--quiet"])
+    assert code == 0
+    prov = Rig.load(tmp_path / "r2.json").extra["calibration"]["cameras"]["left"]
+    assert prov["lens_model"]["model"] == "given" and prov["lens_model"]["source"] == str(out / "rig.json")
+    assert "intrinsics" not in Rig.load(tmp_path / "r2.json").camera("left").extra
     # a camera the session does not have; a rig for another image size: one line, exit 1
     err = _run_fails_args(s, tmp_path, capsys, ["--intrinsics", f"thermal={out / 'rig.json'}"])
     assert "no camera 'thermal'" in err

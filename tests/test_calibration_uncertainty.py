@@ -73,7 +73,10 @@ def test_fronto_parallel_session_is_refused_naming_camera_and_parameter(seed):
     cal = calibrate(s, dets)
     problems = cal.uncertainty_problems()
     assert problems and problems[0].startswith("camera 'cam") and "projection uncertainty" in problems[0]
-    assert "least determined: f" in problems[0] and "add board views in the" in problems[0]
+    import re
+
+    assert re.search(r"least determined: (fx|fy|cx|cy|k\d|p\d) \+- ", problems[0]), problems[0]
+    assert "add board views in the" in problems[0]
 
 
 @pytest.mark.parametrize("seed", [310, 311, 312, 313])

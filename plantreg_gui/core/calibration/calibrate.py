@@ -438,20 +438,10 @@ def check_known_intrinsics(session: Session, known: dict[str, KnownIntrinsics],
 
 def session_known_intrinsics(session: Session) -> dict[str, KnownIntrinsics]:
     """``"intrinsics": "RIG.json"`` of cameras in ``session.json`` (paths relative to the session)."""
-    from ..imageio import read_json
-
-    if not Path(session.path).is_file():
-        return {}
-    try:
-        d = read_json(session.path, "session.json")
-    except InputError:
-        return {}
     out = {}
-    for cam, c in (d.get("cameras") or {}).items():
-        if isinstance(c, dict) and c.get("intrinsics"):
-            f = c["intrinsics"]
-            if not isinstance(f, str):
-                raise InputError(f"camera '{cam}': \"intrinsics\" must be the path of a rig file", session.path)
+    for cam, meta in (getattr(session, "camera_meta", {}) or {}).items():
+        f = meta.get("intrinsics")
+        if cam in session.cameras and f:
             fp = Path(f) if Path(f).is_absolute() else Path(session.folder) / f
             out[cam] = load_known_intrinsics(fp, cam, f"session.json camera '{cam}' intrinsics")
     return out

@@ -32,7 +32,8 @@ def calibrated_rig(calibration: Calibration, session: Session, report: Calibrati
     src = calibration.rig
     rig = Rig.from_dict(src.to_dict())
     for cam in rig.cameras:  # units and band wavelengths: not calibrated, but the rig file carries them
-        cam.extra.update(getattr(session, "camera_meta", {}).get(cam.name, {}))
+        meta = getattr(session, "camera_meta", {}).get(cam.name, {})
+        cam.extra.update({k: v for k, v in meta.items() if k in ("units", "bands")})
     if roi is not None:
         lo, hi = np.asarray(roi[0], float), np.asarray(roi[1], float)
         if lo.shape != (3,) or hi.shape != (3,) or not np.all(lo < hi):

@@ -80,8 +80,14 @@ class RigPage(WizardPage):
         # --- cameras
         cbox = QGroupBox("Cameras")
         cl = QVBoxLayout(cbox)
-        self.cameras = QTableWidget(0, 4)
-        self.cameras.setHorizontalHeaderLabels(["Name (= file name)", "Modality", "Units", "Bands (nm)"])
+        self.cameras = QTableWidget(0, 5)
+        self.cameras.setHorizontalHeaderLabels(["Name (= file name)", "Modality", "Units", "Bands (nm)",
+                                                "Known intrinsics (rig file)"])
+        self.cameras.horizontalHeaderItem(4).setToolTip(
+            "Optional: a rig file (e.g. this camera calibrated on its own, or the maker's values) whose K and "
+            "distortion this camera keeps; only its pose is calibrated. With standard errors in the file (a "
+            "plantreg calibration) they are priors. Double-click to type the path (relative to the session "
+            "folder or absolute); empty = calibrate the lens here")
         self.cameras.horizontalHeaderItem(2).setToolTip("What a pixel value means, e.g. degC, DN, reflectance "
                                                         "(kept in the rig file)")
         self.cameras.horizontalHeaderItem(3).setToolTip("Band centres of a multi-band camera in nm: a list "
@@ -211,12 +217,13 @@ class RigPage(WizardPage):
         self._refresh_depth_combo("ir")
         self._changed()
 
-    def _add_camera(self, name: str, modality: str, units: str = "", bands: str = "") -> None:
+    def _add_camera(self, name: str, modality: str, units: str = "", bands: str = "", intrinsics: str = "") -> None:
         r = self.cameras.rowCount()
         self.cameras.insertRow(r)
         self.cameras.setItem(r, 0, QTableWidgetItem(name))
         self.cameras.setItem(r, 2, QTableWidgetItem(units))
         self.cameras.setItem(r, 3, QTableWidgetItem(bands))
+        self.cameras.setItem(r, 4, QTableWidgetItem(intrinsics))
         combo = QComboBox()
         combo.setEditable(True)
         combo.addItems(MODALITIES)
@@ -262,7 +269,7 @@ class RigPage(WizardPage):
         self.cameras.setRowCount(0)
         for n, m in s.cameras.items():
             meta = s.camera_meta.get(n, {})
-            self._add_camera(n, m, meta.get("units", ""), format_bands(meta.get("bands")))
+            self._add_camera(n, m, meta.get("units", ""), format_bands(meta.get("bands")), meta.get("intrinsics", ""))
         b = s.board
         self.btype.setCurrentText(b.type)
         self.columns.setValue(b.columns)
@@ -332,7 +339,8 @@ class RigPage(WizardPage):
         return board, cams, depth, self.depth_scale.value(), problems
 
     def camera_meta(self) -> tuple[dict[str, dict], list[str]]:
-        """Units and bands per camera from the table ({name: {"units", "bands"}}), and problems."""
+        """Units, bands and known intrinsics per camera from the table ({name: {"units", "bands",
+        "intrinsics"}}), and problems."""
         meta: dict[str, dict] = {}
         problems: list[str] = []
         for r, n in enumerate(self._camera_names()):
@@ -341,6 +349,12 @@ class RigPage(WizardPage):
             text = self.cameras.item(r, 3).text().strip() if self.cameras.item(r, 3) else ""
             if units:
                 m["units"] = units
+            intr = self.cameras.item(r, 4).text().strip() if self.cameras.item(r, 4) else ""
+            if intr:
+                base = Path(self.model.session.folder) if self.model.session is not None else Path.cwd()
+                if not (Path(intr) if Path(intr).is_absolute() else base / intr).is_file():
+                    problems.append(f"camera '{n}': known intrinsics file not found: {intr}")
+                m["intrinsics"] = intr
             known = (self.model.session.camera_meta.get(n, {}).get("bands")
                      if self.model.session is not None else None)
             if text and known and text == format_bands(known):
