@@ -24,14 +24,13 @@ def _rot(axis: str, deg: float) -> np.ndarray:
 
 
 def look_at(centre, target, roll_deg=0.0):
-    """R_cam_rig, t_cam_rig of a camera at ``centre`` (rig frame) looking at ``target``."""
+    """R_cam_rig, t_cam_rig of a camera at ``centre`` (rig frame) turned (yaw, then pitch) to look
+    at ``target``, then rolled."""
     c = np.asarray(centre, float)
-    z = np.asarray(target, float) - c
-    z /= np.linalg.norm(z)
-    x = np.cross([0.0, 1.0, 0.0], z)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = _rot("z", roll_deg) @ np.stack([x, y, z])
+    d = np.asarray(target, float) - c
+    yaw = np.degrees(np.arctan2(d[0], d[2]))
+    pitch = -np.degrees(np.arctan2(d[1], np.hypot(d[0], d[2])))
+    R = _rot("z", roll_deg) @ (_rot("y", yaw) @ _rot("x", pitch)).T
     return R, -R @ c
 
 
