@@ -340,8 +340,9 @@ class UncertaintyMap(_Chart):
             ph = pw / aspect
             left, top = x0 + (cw - pw) / 2, y0 + title_h + 4
             p.setPen(QColor("#222222"))
-            p.drawText(QRectF(x0 + 4, y0 + 2, cw - 8, title_h), Qt.AlignmentFlag.AlignLeft | Qt.TextFlag.TextWordWrap,
-                       m["title"])
+            for li, line in enumerate(str(m["title"]).split("\n")[:2]):  # two lines, each elided to fit
+                p.drawText(QRectF(x0 + 4, y0 + 2 + li * fm.height(), cw - 8, fm.height()), Qt.AlignmentFlag.AlignLeft,
+                           fm.elidedText(line, Qt.TextElideMode.ElideRight, int(cw - 8)))
             lim = float(m["limit"])
             worst = set(np.argsort(-sig.ravel())[:3].tolist())
             sx, sy = pw / gw, ph / gh

@@ -197,7 +197,7 @@ def uncertainty_maps(cal) -> list[dict[str, Any]]:
     for name, u in uncertainty(cal).items():
         med, worst = u.summary("intrinsics")
         lim = limits_px(u)[0]
-        title = (f"{name}: σ median {med:.2f}, worst {worst:.2f} px at {u.distance_m:.2f} m (limit {lim:.2f})\n"
+        title = (f"{name}: σ median {med:.2f}, worst {worst:.2f} px (limit {lim:.2f})\n"
                  f"add views: {', '.join(u.add_views)}")
         out.append({"camera": name, "sigma": u.sigma_intrinsics, "corners": u.corners, "limit": lim,
                     "aspect": u.width / max(u.height, 1), "title": title})
