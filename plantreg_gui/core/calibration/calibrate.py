@@ -535,6 +535,7 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
     if anchor != ref:  # express everything in the reference camera's frame
         R_ref, t_ref = placed[ref]
         placed = {c: (R @ R_ref.T, t - R @ R_ref.T @ t_ref) for c, (R, t) in placed.items()}
+        placed[ref] = (np.eye(3), np.zeros(3))  # exactly (not -0.0 mm of rounding)
     progress(0.35, "initial extrinsics")
 
     # board poses in the rig frame: the medoid of what the cameras that saw the pose say. A view

@@ -88,8 +88,8 @@ class ExtrinsicsPage(WizardPage):
                         f"{rig_sig[0]:.2f} / {rig_sig[1]:.2f}" if rig_sig else "–"]
                 for j, v in enumerate(vals):
                     self.poses.setItem(i, j, item(v, bold=(j == 0)))
-            self.poses.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
-            self.poses.horizontalHeader().setSectionResizeMode(0, QHeaderView.ResizeMode.ResizeToContents)
+            self.poses.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+            self.poses.horizontalHeader().setStretchLastSection(True)
             self.poses.resizeRowsToContents()
             h = self.poses.horizontalHeader().height() + sum(self.poses.rowHeight(i) for i in range(len(rig.cameras)))
             self.poses.setFixedHeight(h + 2 * self.poses.frameWidth() + 2)
