@@ -115,6 +115,24 @@ def test_known_intrinsics_from_a_rig_file(stereo_run, shared_data, tmp_path, cap
     assert "1280x960" in err and "640x480" in err and "camera 'left'" in err
 
 
+def test_too_few_views_are_refused_as_uncertain_unless_accepted(shared_data, tmp_path, capsys):
+    """Three pairs: every error figure looks fine, but three views cannot check a lens model (and
+    on this set leave the left focal length 5 sigma off the full set's): refused, naming the
+    cameras and what is missing; --accept-uncertain writes it, flagged in the rig and the report."""
+    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04"])
+    err = _run_fails(s, tmp_path, capsys)
+    assert "calibration too uncertain, nothing written" in err and "--accept-uncertain" in err
+    assert "camera 'left': only 3 views, too few to check its lens model" in err
+    out = tmp_path / "accepted"
+    code = main(["calibrate", str(s), "--out", str(out / "rig.json"), "--report", str(out / "r.json"), "--quiet",
+                 "--accept-uncertain"])
+    err = capsys.readouterr().err
+    assert code == 0 and "kept with --accept-uncertain: camera 'left': only 3 views" in err
+    flagged = Rig.load(out / "rig.json").extra["calibration"]["accepted_uncertain"]
+    assert any(f.startswith("camera 'right': only 3 views") for f in flagged)
+    assert json.loads((out / "r.json").read_text())["accepted_uncertain"] == flagged
+
+
 def test_classic_detector_flags_pair_02(shared_data, tmp_path):
     """With OpenCV's classic corner pipeline (the one behind the published figures) pair 02 is the
     worst view of both cameras, and is flagged with its number. (Our default detector,
@@ -231,7 +249,7 @@ def test_failed_rig_write_leaves_no_report_and_no_traceback(shared_data, tmp_pat
     the report/CSVs already written are removed (a report without its rig must not look complete)."""
     import errno
 
-    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04"])
+    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04", "pose_05"])
     out = tmp_path / "out"
     out.mkdir()
 

@@ -51,6 +51,8 @@ from .detect import FOUND, MISSING, Detection, check_image_sizes, suggest_board_
 from .session import Session
 
 MIN_VIEWS = 3
+#: fewer views than this leave the lens model unchecked (no cross-validation): refused as uncertain
+MIN_CV_VIEWS = 4
 #: A calibration whose joint RMS reprojection error, or one camera's, exceeds this many pixels
 #: has failed (a wrong board size gives ~9 px; good rigs 0.05-0.5 px): ``plantreg calibrate``
 #: writes nothing and exits non-zero unless ``--max-rms`` allows more (docs/errors.md).
@@ -166,8 +168,16 @@ class Calibration:
         return out
 
     def uncertainty_problems(self) -> list[str]:
-        """Cameras and poses whose uncertainty exceeds the documented limits (one sentence each)."""
-        return uncertainty_problems(self.uncertainty)
+        """Cameras and poses whose uncertainty exceeds the documented limits, and cameras with too
+        few views to check their lens model against views it was not fitted to (one sentence
+        each): the standard errors hold only for a model the views support."""
+        out = []
+        for name, c in self.intrinsics.items():
+            if c.model is not None and c.model.n_folds == 0 and c.n_views < MIN_CV_VIEWS:
+                out.append(f"camera '{name}': only {c.n_views} views, too few to check its lens model against "
+                           f"views it was not fitted to (at least {MIN_CV_VIEWS}); record more board views, tilted, "
+                           "all over its image")
+        return out + uncertainty_problems(self.uncertainty)
 
 
 # ---------------------------------------------------------------------- small geometry helpers
