@@ -48,6 +48,8 @@ def main(argv=None) -> int:
     def plain() -> None:
         found = {}
         for k, d in sorted(dets.items()):
+            if d.path is None:  # no image of this camera in this pose
+                continue
             g = cv2.imread(str(d.path), cv2.IMREAD_GRAYSCALE)
             ok, c = cv2.findChessboardCorners(g, s.board.pattern_size,
                                               flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
