@@ -82,7 +82,7 @@ class RigPage(WizardPage):
         cl = QVBoxLayout(cbox)
         self.cameras = QTableWidget(0, 5)
         self.cameras.setHorizontalHeaderLabels(["Name (= file name)", "Modality", "Units", "Bands (nm)",
-                                                "Known intrinsics (rig file)"])
+                                                "Lens file"])
         self.cameras.horizontalHeaderItem(4).setToolTip(
             "Optional: a rig file (e.g. this camera calibrated on its own, or the maker's values) whose K and "
             "distortion this camera keeps; only its pose is calibrated. With standard errors in the file (a "
@@ -95,7 +95,7 @@ class RigPage(WizardPage):
                                                         "'400-1000/100' (kept in the rig file; the registration "
                                                         "shows spectra in nm with it)")
         self.cameras.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
-        for col in (2, 3):  # units and bands take what they need; name and modality share the rest
+        for col in (2, 3, 4):  # units, bands, lens file take what they need; name and modality share the rest
             self.cameras.horizontalHeader().setSectionResizeMode(col, QHeaderView.ResizeMode.ResizeToContents)
         self.cameras.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.cameras.itemChanged.connect(self._changed)
