@@ -1,4 +1,4 @@
-"""core/process_job.py: a routine in the worker process keeps the Reporter contract (result,
+"""core/jobs/process_job.py: a routine in the worker process keeps the Reporter contract (result,
 user errors, progress, cancel) of a routine on a thread."""
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def _forever(progress=None):
 
 def test_result_progress_errors_and_cancel():
     from plantreg_gui.core.errors import Cancelled, InputError
-    from plantreg_gui.core.process_job import run_in_process
+    from plantreg_gui.core.jobs.process_job import run_in_process
     from plantreg_gui.core.progress import Reporter
 
     seen = []
