@@ -15,8 +15,8 @@ import cv2
 import numpy as np
 
 from plantreg_gui.core.calibration import FOUND, Board, Detection, Session
-from plantreg_gui.core.camera import Camera
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.camera.camera import Camera
+from plantreg_gui.core.camera.rig import Rig
 
 
 def _rot(axis: str, deg: float) -> np.ndarray:

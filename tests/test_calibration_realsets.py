@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from plantreg_gui.cli import main
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.camera.rig import Rig
 from realcal import herrera_reference, herrera_session, lepton_session
 
 

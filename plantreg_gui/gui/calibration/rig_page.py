@@ -1,4 +1,8 @@
-"""Page 1: rig and board — open or create a capture session, cameras, depth camera, board."""
+"""Page 1: rig and board — open or create a capture session, cameras, depth camera, board.
+
+Length: the rig and board form, its live board preview and the session-contents summary are one
+page a technician fills in together; the parsing helpers (bands) sit at the top.
+"""
 
 from __future__ import annotations
 

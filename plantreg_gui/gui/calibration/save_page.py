@@ -1,4 +1,8 @@
-"""Page 7: save — ROI editor over a depth map, then the rig file, the report JSON and CSV tables."""
+"""Page 7: save — ROI editor over a depth map, then the rig file, the report JSON and CSV tables.
+
+Length: the ROI editor with its depth-map preview and fit, the file choice and the save with its
+two confirmations (replacing files, an uncertain calibration) are one page.
+"""
 
 from __future__ import annotations
 
