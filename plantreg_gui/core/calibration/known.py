@@ -60,7 +60,7 @@ def check_known_intrinsics(session: Session, known: dict[str, KnownIntrinsics],
                            sizes: dict[str, tuple[int, int]] | None = None) -> None:
     """Every given camera exists in the session and (with ``sizes``, or from its first image)
     has the size the intrinsics were calibrated for."""
-    from ..imageio import read_image
+    from ..io.imageio import read_image
 
     for cam, k in known.items():
         if cam not in session.cameras:
