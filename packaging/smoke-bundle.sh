@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# Smoke test of the frozen bundle, headless, from a scratch folder and with no Python environment
+# of ours visible (PYTHONPATH, PYTHONHOME, VIRTUAL_ENV unset; the bundle must carry everything):
+#   bash packaging/smoke-bundle.sh [BUNDLE_DIR]     (default dist/plantreg; run by packaging/bundle.sh)
+# Runs `plantreg --version`, `plantreg demo`, `plantreg register` on the demo and checks its
+# outputs, `plantreg-gui --demo --screenshot` under xvfb-run (else Qt's offscreen platform) and
+# checks the screenshot is not blank, checks the packaged icon and desktop entry
+# (`plantreg-gui --install-desktop` into a scratch XDG_DATA_HOME, validated, then uninstalled),
+# and prints the bundle's size and start-up time: the wall time of `plantreg-gui --screenshot`
+# of the empty window (start, splash, window, 0.5 s idle, grab, exit), and with BASELINE_GUI set
+# (a command running the same program from a venv, as packaging/bundle.sh does) its ratio to that.
+# PY: a Python with numpy and Pillow to read the screenshot (default .venv/bin/python, else python3).
+# Exit 0: every check passed.
+set -euo pipefail
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+B=$(cd "${1:-$ROOT/dist/plantreg}" && pwd)
+PY=${PY:-$ROOT/.venv/bin/python}
+[ -x "$PY" ] || PY=python3
+[ -x "$B/plantreg" ] && [ -x "$B/plantreg-gui" ] || { echo "smoke-bundle: no plantreg/plantreg-gui in $B" >&2; exit 1; }
+W=$(mktemp -d -t plantreg-smoke.XXXXXX)
+cd "$W"
+unset PYTHONPATH PYTHONHOME VIRTUAL_ENV
+fail() { echo "smoke-bundle: FAILED: $*" >&2; exit 1; }
+if command -v xvfb-run >/dev/null 2>&1; then
+  headless() { xvfb-run -a -s "-screen 0 1600x1000x24" "$@"; }
+else
+  headless() { QT_QPA_PLATFORM=offscreen "$@"; }
+fi
+secs() { "$PY" -c 'import sys, time; print(f"{time.time() - float(sys.argv[1]):.1f}")' "$1"; }
+now() { "$PY" -c 'import time; print(time.time())'; }
+T0=$(now)
+
+echo "bundle: $B, $(du -sm "$B" | cut -f1) MiB, $(find "$B" -type f | wc -l) files"
+"$B/plantreg" --version
+[ "$("$B/plantreg-gui" --version)" = "$("$B/plantreg" --version)" ] || fail "plantreg-gui --version differs"
+
+t=$(now)
+"$B/plantreg" demo demo
+"$B/plantreg" register --rig demo/rig.json --recording demo/recording --target ir --out demo/out
+for f in summary.json; do [ -s "demo/out/$f" ] || fail "plantreg register wrote no $f"; done
+echo "plantreg demo + register: $(secs "$t") s"
+
+t=$(now)
+headless "$B/plantreg-gui" --screenshot empty.png --timeout 120 >/dev/null
+START=$(secs "$t")
+echo "start-up (plantreg-gui --screenshot of the empty window, start to exit): $START s"
+if [ -n "${BASELINE_GUI:-}" ]; then
+  t=$(now)
+  headless $BASELINE_GUI --screenshot empty-venv.png --timeout 120 >/dev/null
+  BASE=$(secs "$t")
+  echo "same from the venv ($BASELINE_GUI): $BASE s; bundle / venv = $("$PY" -c "print(f'{$START / $BASE:.2f}')")"
+fi
+
+t=$(now)
+headless "$B/plantreg-gui" --demo --screenshot demo.png --timeout 600
+echo "plantreg-gui --demo --screenshot: $(secs "$t") s"
+"$PY" - demo.png <<'EOF'
+import sys
+import numpy as np
+from PIL import Image
+a = np.asarray(Image.open(sys.argv[1]).convert("RGB")).astype(np.int16)
+colours = len(np.unique(a.reshape(-1, 3) // 8, axis=0))
+print(f"screenshot {a.shape[1]}x{a.shape[0]}, {colours} colours (5-bit), grey level sd {a.mean(axis=2).std():.1f}")
+# a blank or black window has a handful of colours; the demo's images and 3D view have thousands
+assert colours > 500 and a.mean(axis=2).std() > 10, "the screenshot looks blank"
+EOF
+
+XDG_DATA_HOME="$W/xdg" "$B/plantreg-gui" --install-desktop
+ENTRY="$W/xdg/applications/plantreg-gui.desktop"
+[ -s "$ENTRY" ] && [ -s "$W/xdg/icons/hicolor/scalable/apps/plantreg.svg" ] || fail "no desktop entry or icon installed"
+grep -qx "Exec=$B/plantreg-gui" "$ENTRY" || fail "Exec does not name $B/plantreg-gui: $(grep ^Exec "$ENTRY")"
+if command -v desktop-file-validate >/dev/null 2>&1; then
+  desktop-file-validate "$ENTRY" || fail "desktop-file-validate rejected the entry"
+fi
+XDG_DATA_HOME="$W/xdg" "$B/plantreg-gui" --uninstall-desktop
+[ -z "$(find "$W/xdg" -type f)" ] || fail "--uninstall-desktop left files behind"
+
+echo "smoke test passed in $(secs "$T0") s (screenshots in $W)"
