@@ -21,10 +21,11 @@ WORK=$(cd "$WORK" && pwd)
 T0=$(date +%s)
 step() { echo "== [$(( $(date +%s) - T0 )) s] $*"; }
 fail() { echo "check-wheel: FAILED: $*" >&2; exit 1; }
+. "$ROOT/packaging/checks.sh"
 
 step "copy the sources to $WORK/src"
 rm -rf "$WORK/src" "$WORK/dist" "$WORK/venv" "$WORK/run" "$WORK/xdg"
-mkdir -p "$WORK/src" "$WORK/run" "$WORK/xdg"
+mkdir -p "$WORK/src" "$WORK/run"
 cp -r "$ROOT/pyproject.toml" "$ROOT/README.md" "$ROOT/LICENSE" "$ROOT/plantreg_gui" "$WORK/src/"
 find "$WORK/src" -name __pycache__ -prune -exec rm -rf {} +
 
@@ -70,38 +71,10 @@ plantreg register --rig demo/rig.json --recording demo/recording --target ir --o
 [ -f demo/out/summary.json ] || fail "register wrote no summary.json"
 
 step "plantreg-gui --demo --screenshot"
-if command -v xvfb-run >/dev/null 2>&1; then
-  xvfb-run -a -s "-screen 0 1600x1000x24" plantreg-gui --demo --screenshot shot.png --timeout 600
-else
-  QT_QPA_PLATFORM=offscreen plantreg-gui --demo --screenshot shot.png --timeout 600
-fi
-"$VPY" - shot.png <<'EOF'
-import sys
-import numpy as np
-from PIL import Image
-a = np.asarray(Image.open(sys.argv[1]).convert("RGB")).astype(np.int16)
-colours = len(np.unique(a.reshape(-1, 3) // 8, axis=0))
-print(f"screenshot {a.shape[1]}x{a.shape[0]}, {colours} colours (5-bit), grey level sd {a.mean(axis=2).std():.1f}")
-assert a.shape[0] > 400 and a.shape[1] > 600, "screenshot too small"
-# a blank or black window has a handful of colours; the demo's images and 3D view have thousands
-assert colours > 500 and a.mean(axis=2).std() > 10, "the screenshot looks blank"
-EOF
+headless plantreg-gui --demo --screenshot shot.png --timeout 600
+check_screenshot "$VPY" shot.png || fail "the screenshot looks blank"
 
 step "plantreg-gui --install-desktop / --uninstall-desktop"
-export XDG_DATA_HOME="$WORK/xdg"
-plantreg-gui --install-desktop
-ENTRY="$XDG_DATA_HOME/applications/plantreg-gui.desktop"
-ICON="$XDG_DATA_HOME/icons/hicolor/scalable/apps/plantreg.svg"
-[ -s "$ENTRY" ] && [ -s "$ICON" ] || fail "no desktop entry or icon under $XDG_DATA_HOME"
-grep -qx "Exec=$WORK/venv/bin/plantreg-gui" "$ENTRY" || fail "Exec does not name $WORK/venv/bin/plantreg-gui: $(grep ^Exec "$ENTRY")"
-if command -v desktop-file-validate >/dev/null 2>&1; then
-  desktop-file-validate "$ENTRY" || fail "desktop-file-validate rejected $ENTRY"
-  echo "desktop-file-validate: ok"
-else
-  echo "desktop-file-validate not installed (Debian: desktop-file-utils); entry not validated"
-fi
-plantreg-gui --uninstall-desktop
-left=$(find "$XDG_DATA_HOME" -type f)
-[ -z "$left" ] || fail "left behind after --uninstall-desktop: $left"
+check_desktop "$WORK/venv/bin/plantreg-gui" "$WORK" || fail "desktop entry"
 
 step "all checks passed in $(( $(date +%s) - T0 )) s (work folder $WORK)"

@@ -21,11 +21,7 @@ W=$(mktemp -d -t plantreg-smoke.XXXXXX)
 cd "$W"
 unset PYTHONPATH PYTHONHOME VIRTUAL_ENV
 fail() { echo "smoke-bundle: FAILED: $*" >&2; exit 1; }
-if command -v xvfb-run >/dev/null 2>&1; then
-  headless() { xvfb-run -a -s "-screen 0 1600x1000x24" "$@"; }
-else
-  headless() { QT_QPA_PLATFORM=offscreen "$@"; }
-fi
+. "$ROOT/packaging/checks.sh"
 secs() { "$PY" -c 'import sys, time; print(f"{time.time() - float(sys.argv[1]):.1f}")' "$1"; }
 now() { "$PY" -c 'import time; print(time.time())'; }
 T0=$(now)
@@ -54,25 +50,8 @@ fi
 t=$(now)
 headless "$B/plantreg-gui" --demo --screenshot demo.png --timeout 600
 echo "plantreg-gui --demo --screenshot: $(secs "$t") s"
-"$PY" - demo.png <<'EOF'
-import sys
-import numpy as np
-from PIL import Image
-a = np.asarray(Image.open(sys.argv[1]).convert("RGB")).astype(np.int16)
-colours = len(np.unique(a.reshape(-1, 3) // 8, axis=0))
-print(f"screenshot {a.shape[1]}x{a.shape[0]}, {colours} colours (5-bit), grey level sd {a.mean(axis=2).std():.1f}")
-# a blank or black window has a handful of colours; the demo's images and 3D view have thousands
-assert colours > 500 and a.mean(axis=2).std() > 10, "the screenshot looks blank"
-EOF
+check_screenshot "$PY" demo.png || fail "the screenshot looks blank"
 
-XDG_DATA_HOME="$W/xdg" "$B/plantreg-gui" --install-desktop
-ENTRY="$W/xdg/applications/plantreg-gui.desktop"
-[ -s "$ENTRY" ] && [ -s "$W/xdg/icons/hicolor/scalable/apps/plantreg.svg" ] || fail "no desktop entry or icon installed"
-grep -qx "Exec=$B/plantreg-gui" "$ENTRY" || fail "Exec does not name $B/plantreg-gui: $(grep ^Exec "$ENTRY")"
-if command -v desktop-file-validate >/dev/null 2>&1; then
-  desktop-file-validate "$ENTRY" || fail "desktop-file-validate rejected the entry"
-fi
-XDG_DATA_HOME="$W/xdg" "$B/plantreg-gui" --uninstall-desktop
-[ -z "$(find "$W/xdg" -type f)" ] || fail "--uninstall-desktop left files behind"
+check_desktop "$B/plantreg-gui" "$W" || fail "desktop entry"
 
 echo "smoke test passed in $(secs "$T0") s (screenshots in $W)"
