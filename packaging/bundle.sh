@@ -5,7 +5,10 @@
 # PY: the Python with plantreg's dependencies and PyInstaller (default .venv/bin/python).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-PY=${PY:-.venv/bin/python}
+PY=$(realpath "${PY:-.venv/bin/python}")
+export PY
+# start-up is compared with the same program run from the venv (packaging/smoke-bundle.sh)
+export BASELINE_GUI=${BASELINE_GUI:-"$PY -m plantreg_gui.gui.app"}
 T0=$(date +%s)
 "$PY" -m PyInstaller --noconfirm --clean --log-level WARN --distpath dist --workpath build/pyinstaller \
   packaging/pyinstaller/plantreg.spec

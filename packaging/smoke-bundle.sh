@@ -4,7 +4,8 @@
 #   bash packaging/smoke-bundle.sh [BUNDLE_DIR]     (default dist/plantreg; run by packaging/bundle.sh)
 # Runs `plantreg --version`, `plantreg demo`, `plantreg register` on the demo and checks its
 # outputs, `plantreg-gui --demo --screenshot` under xvfb-run (else Qt's offscreen platform) and
-# checks the screenshot is not blank, checks the packaged icon and desktop entry
+# `plantreg-gui --calibrate-demo --page 3 --screenshot` (the wizard's worker process) and checks
+# the screenshots are not blank and the wizard run printed no error, checks the packaged icon and desktop entry
 # (`plantreg-gui --install-desktop` into a scratch XDG_DATA_HOME, validated, then uninstalled),
 # and prints the bundle's size and start-up time: the wall time of `plantreg-gui --screenshot`
 # of the empty window (start, splash, window, 0.5 s idle, grab, exit), and with BASELINE_GUI set
@@ -51,6 +52,15 @@ t=$(now)
 headless "$B/plantreg-gui" --demo --screenshot demo.png --timeout 600
 echo "plantreg-gui --demo --screenshot: $(secs "$t") s"
 check_screenshot "$PY" demo.png || fail "the screenshot looks blank"
+
+# the wizard's calculations run in a spawned worker process: in a frozen app that process is the
+# bundle's own executable again (multiprocessing.freeze_support)
+t=$(now)
+headless "$B/plantreg-gui" --calibrate-demo --page 3 --screenshot wizard.png --timeout 900 2>wizard.err \
+  || { cat wizard.err >&2; fail "plantreg-gui --calibrate-demo --page 3"; }
+echo "plantreg-gui --calibrate-demo --page 3 --screenshot: $(secs "$t") s"
+check_screenshot "$PY" wizard.png || fail "the wizard's screenshot looks blank"
+! grep -E "Traceback|Exception ignored" wizard.err || fail "the wizard run printed errors (above)"
 
 check_desktop "$B/plantreg-gui" "$W" || fail "desktop entry"
 
