@@ -5,7 +5,8 @@
 # PY: the Python with plantreg's dependencies and PyInstaller (default .venv/bin/python).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-PY=$(realpath "${PY:-.venv/bin/python}")
+PY=${PY:-.venv/bin/python}
+case "$PY" in /*) ;; *) PY="$PWD/$PY" ;; esac  # absolute (the smoke test runs elsewhere), link kept: the venv's
 export PY
 # start-up is compared with the same program run from the venv (packaging/smoke-bundle.sh)
 export BASELINE_GUI=${BASELINE_GUI:-"$PY -m plantreg_gui.gui.app"}
