@@ -71,12 +71,13 @@ def installed_executable() -> Path:
 
 def exec_arg(path: Path) -> str:
     """``path`` as one argument of a desktop entry's ``Exec`` key: quoted when it has a reserved
-    character, with the quoting rules' escapes, then the key-file escape of backslashes."""
+    character, with the quoting rules' escapes, ``%`` doubled, then the key-file escape of
+    backslashes (Desktop Entry Specification, "The Exec key")."""
     s = str(path)
     reserved = set(" \t\n\"'\\><~|&;$*?#()`")
     if any(c in reserved for c in s):
         s = '"' + "".join("\\" + c if c in '"`$\\' else c for c in s) + '"'
-    return s.replace("\\", "\\\\")
+    return s.replace("%", "%%").replace("\\", "\\\\")  # a literal % is %% (field codes)
 
 
 def desktop_entry(exe: Path) -> str:
@@ -128,6 +129,10 @@ def install(home: Path | None = None, exe: Path | None = None) -> list[Path]:
     the two paths written."""
     home = data_home() if home is None else Path(home)
     exe = installed_executable() if exe is None else Path(exe)
+    if any(c in str(exe) for c in "\n\r"):
+        from .core.errors import InputError
+
+        raise InputError(f"a desktop entry cannot name a program whose path has a line break: {exe!r}")
     icon, entry = icon_path(home), entry_path(home)
     had_icon = icon.exists()
     _write(icon, resources.read_bytes(ICON_NAME))

@@ -89,7 +89,7 @@ def test_resources_are_read_from_the_package():
 def unquote_exec(value: str) -> list[str]:
     """The arguments of a desktop entry's Exec value, by the Desktop Entry Specification (key-file
     unescaping of backslashes first, then double-quoted arguments with \\" \\` \\$ \\\\ escapes)."""
-    s, i, args = value.replace("\\\\", "\\"), 0, []
+    s, i, args = value.replace("\\\\", "\\").replace("%%", "%"), 0, []
     while i < len(s):
         if s[i] == " ":
             i += 1
@@ -127,7 +127,7 @@ def validate(path: Path) -> None:
         assert r.returncode == 0 and "error" not in r.stdout, r.stdout
 
 
-@pytest.mark.parametrize("exe_name", ["plantreg-gui", "plantreg gui $HOME \"q\" \\b`x`"])
+@pytest.mark.parametrize("exe_name", ["plantreg-gui", "plantreg gui $HOME \"q\" \\b`x` 100%"])
 def test_install_and_uninstall_desktop(tmp_path, exe_name):
     home = tmp_path / "share"
     exe = tmp_path / "venv dir" / "bin" / exe_name
@@ -259,3 +259,11 @@ def test_help_about_lists_versions_and_open_files(qapp, qtbot, no_qt_leaks, tmp_
         dlg.close()
     finally:
         win.close()
+
+
+def test_install_desktop_refuses_a_path_with_a_line_break(tmp_path):
+    from plantreg_gui.core.errors import InputError
+
+    with pytest.raises(InputError, match="line break"):
+        desktop.install(tmp_path / "share", tmp_path / "a\nb" / "plantreg-gui")
+    assert not (tmp_path / "share").exists()
