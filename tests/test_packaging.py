@@ -227,7 +227,7 @@ def test_about_rows_import_nothing_heavy():
 
 
 @pytest.mark.gui
-def test_help_about_lists_versions_and_open_files(qapp, qtbot, no_qt_leaks, tmp_path, demo_dir):
+def test_help_about_lists_versions_and_open_files(qapp, qtbot, no_qt_leaks, tmp_path):
     import platform
 
     import vtkmodules
@@ -242,7 +242,8 @@ def test_help_about_lists_versions_and_open_files(qapp, qtbot, no_qt_leaks, tmp_
     win.show()
     assert not win.windowIcon().isNull()
     try:
-        win.workspace.open_rig(demo_dir / "rig.json")
+        rig = ROOT / "resources" / "plant3dimagereg" / "rig.json"
+        win.workspace.open_rig(rig)
         assert [a.text() for a in win.help_menu.actions()] == ["About plantreg…"]
         win.about_action.trigger()
         dlg = win.about_dialog
@@ -251,7 +252,7 @@ def test_help_about_lists_versions_and_open_files(qapp, qtbot, no_qt_leaks, tmp_
         assert rows["plantreg"] == plantreg_gui.__version__
         assert rows["Python"].startswith(platform.python_version())
         assert rows["Qt"] == qVersion() and rows["VTK"] == vtkmodules.__version__
-        assert rows["rig"] == str(win.workspace.rig_path) and Path(rows["rig"]).name == "rig.json"
+        assert Path(rows["rig"]).resolve() == rig.resolve()
         assert rows["recording"] == "none open"
         assert f"plantreg: {plantreg_gui.__version__}" in dlg.plain_text()
         assert plantreg_gui.__version__ in dlg.text.text()
