@@ -268,3 +268,22 @@ def test_install_desktop_refuses_a_path_with_a_line_break(tmp_path):
     with pytest.raises(InputError, match="line break"):
         desktop.install(tmp_path / "share", tmp_path / "a\nb" / "plantreg-gui")
     assert not (tmp_path / "share").exists()
+
+
+def test_menu_caches_refreshed_only_where_the_desktop_keeps_them(tmp_path):
+    """No cache is created (uninstall could not tell it from the user's); an existing icon cache
+    is rebuilt by gtk-update-icon-cache, where that tool is installed: with the new icon after
+    install, without it after uninstall."""
+    bare, cached = tmp_path / "bare", tmp_path / "cached"
+    exe = Path(sys.executable)
+    desktop.install(bare, exe)
+    assert sorted(p.name for p in bare.rglob("*") if p.is_file()) == ["plantreg-gui.desktop", "plantreg.svg"]
+    cache = cached / "icons" / "hicolor" / "icon-theme.cache"
+    cache.parent.mkdir(parents=True)
+    cache.write_bytes(b"")
+    desktop.install(cached, exe)
+    if shutil.which("gtk-update-icon-cache"):
+        assert b"plantreg" in cache.read_bytes()
+    desktop.uninstall(cached)
+    # rebuilt without our icon (gtk-update-icon-cache drops a cache of a theme left with no icon)
+    assert not cache.is_file() or b"plantreg" not in cache.read_bytes()
