@@ -10,7 +10,7 @@
 # and prints the bundle's size and start-up time: the wall time of `plantreg-gui --screenshot`
 # of the empty window (start, splash, window, 0.5 s idle, grab, exit), and with BASELINE_GUI set
 # (a command running the same program from a venv, as packaging/bundle.sh does) its ratio to that.
-# PY: a Python with numpy and Pillow to read the screenshot (default .venv/bin/python, else python3).
+# PY: a Python with numpy, Pillow and tifffile to read the screenshots and a registered TIFF (default .venv/bin/python, else python3).
 # Exit 0: every check passed.
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
@@ -34,7 +34,19 @@ echo "bundle: $B, $(du -sm "$B" | cut -f1) MiB, $(find "$B" -type f | wc -l) fil
 t=$(now)
 "$B/plantreg" demo demo
 "$B/plantreg" register --rig demo/rig.json --recording demo/recording --target ir --out demo/out
-for f in summary.json; do [ -s "demo/out/$f" ] || fail "plantreg register wrote no $f"; done
+for f in summary.json registered/thermal.tif registered/hyperspectral.tif pointcloud.ply mosaic.png; do
+  [ -s "demo/out/$f" ] || fail "plantreg register wrote no $f"
+done
+# the registered TIFFs are deflate with a floating-point predictor (imagecodecs' codecs in the bundle)
+"$PY" - demo/out/registered/thermal.tif <<'EOF' || fail "registered/thermal.tif"
+import sys
+import numpy as np
+import tifffile
+a = tifffile.imread(sys.argv[1])
+v = a[np.isfinite(a)]
+print(f"{sys.argv[1]}: {a.shape} {a.dtype}, {v.size} registered pixels, median {np.median(v):.2f} deg C")
+assert v.size > 0.05 * a.size and 15 < np.median(v) < 35, "the registered thermal image is not a leaf's temperature"
+EOF
 echo "plantreg demo + register: $(secs "$t") s"
 
 t=$(now)
