@@ -63,7 +63,7 @@ def _prepare(data: Path, n: int) -> list[Path]:
 def open3d_timer() -> Iterator[list[float]]:
     """While active, ``spent[0]`` accumulates the wall seconds spent inside Open3D (BVH builds,
     ``cast``, ``occluded`` of ``raycast.MeshScene``); reset it to 0 between runs."""
-    from plantreg_gui.core import raycast
+    from plantreg_gui.core.geometry import raycast
 
     spent = [0.0]
     o_init, o_cast, o_occ = raycast.MeshScene.__init__, raycast.MeshScene.cast, raycast.MeshScene.occluded
@@ -87,9 +87,9 @@ def open3d_timer() -> Iterator[list[float]]:
 
 def _raycast_budget(data: Path, repeat: int) -> float:
     """Seconds inside Open3D for one registration (in this process, libraries already loaded)."""
-    from plantreg_gui.core.recording import Recording
-    from plantreg_gui.core.register import Registrar
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.data.recording import Recording
+    from plantreg_gui.core.registration.register import Registrar
+    from plantreg_gui.core.camera.rig import Rig
 
     with open3d_timer() as spent:
         rig = Rig.load(data / "rig.json")
@@ -113,11 +113,11 @@ def plain_open3d_budget(data: Path, repeat: int, target: str = "ir") -> float:
     where they can hit, P3.2 tests only where undecided): ``_raycast_budget``."""
     import numpy as np
 
-    from plantreg_gui.core.o3d_core import open3d_core
-    from plantreg_gui.core.raycast import pixel_rays_rig
-    from plantreg_gui.core.recording import Recording
-    from plantreg_gui.core.register import Registrar
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.geometry.o3d_core import open3d_core
+    from plantreg_gui.core.geometry.raycast import pixel_rays_rig
+    from plantreg_gui.core.data.recording import Recording
+    from plantreg_gui.core.registration.register import Registrar
+    from plantreg_gui.core.camera.rig import Rig
 
     o3d = open3d_core()
     rig = Rig.load(data / "rig.json")

@@ -47,10 +47,10 @@ def main() -> int:
     from bench_batch import open3d_timer, plain_open3d_budget  # type: ignore[import-not-found]
     from bench_register import _prepare  # type: ignore[import-not-found]
 
-    from plantreg_gui.core.export import write_outputs
-    from plantreg_gui.core.recording import Recording
-    from plantreg_gui.core.register import Registrar
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.export.export import write_outputs
+    from plantreg_gui.core.data.recording import Recording
+    from plantreg_gui.core.registration.register import Registrar
+    from plantreg_gui.core.camera.rig import Rig
 
     _prepare(args.data)
     rig = Rig.load(args.data / "rig.json")

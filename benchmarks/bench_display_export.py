@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from plantreg_gui.core import display
-from plantreg_gui.core.camera import Camera
-from plantreg_gui.core.export import write_outputs
-from plantreg_gui.core.register import RegistrationParams, RegistrationResult
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.display import display
+from plantreg_gui.core.camera.camera import Camera
+from plantreg_gui.core.export.export import write_outputs
+from plantreg_gui.core.registration.register import RegistrationParams, RegistrationResult
+from plantreg_gui.core.camera.rig import Rig
 
 
 def _time(fn, repeat=3) -> float:

@@ -5,7 +5,7 @@ Usage (under Xvfb on a headless machine)::
     xvfb-run -a python benchmarks/bench_gui_stalls.py [--only NAME ...] [--repeat N]
 
 Each scenario in :data:`SCENARIOS` prepares its widgets (not measured), starts its work and is
-measured with :class:`~plantreg_gui.gui.stall_probe.StallProbe` until its ``done`` predicate holds.
+measured with :class:`~stall_probe.StallProbe` until its ``done`` predicate holds.
 The table prints, per scenario, the wall time, the longest gap, the number of gaps over 200 ms,
 and what the progress bar said just before the longest gap (where to look for the cause).
 The goal (issue 11) is no gap over 200 ms on an idle 2-core machine; figures on a loaded machine
@@ -21,6 +21,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+
+sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1] / "tests"))  # stall_probe
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -252,7 +254,7 @@ class _LabelledProbe:
     """A StallProbe that remembers what the progress bars said before its longest gap."""
 
     def __init__(self, ctx: Context):
-        from plantreg_gui.gui.stall_probe import StallProbe
+        from stall_probe import StallProbe
 
         self.probe = StallProbe()
         self.ctx = ctx

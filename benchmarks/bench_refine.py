@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_refine import registration_errors  # noqa: E402  (one definition)
 
-from plantreg_gui.core.refine import refine_rig  # noqa: E402
+from plantreg_gui.core.rigfit.refine import refine_rig  # noqa: E402
 from plantreg_gui.core.synthetic import demo_rig, ground_truth, make_plant_scene, render_recording  # noqa: E402
 from plantreg_gui.core.synthetic.landmarks import perturb_rig  # noqa: E402
 

@@ -9,8 +9,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from plantreg_gui.core.hits import HitImage
-from plantreg_gui.core.region import region_mask, region_stats
+from plantreg_gui.core.registration.hits import HitImage
+from plantreg_gui.core.registration.region import region_mask, region_stats
 
 
 def main() -> None:

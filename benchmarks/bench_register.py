@@ -47,9 +47,9 @@ def _prepare(data: Path) -> None:
 def _child(data: Path, target: str, repeat: int) -> None:
     import numpy as np
 
-    from plantreg_gui.core.recording import Recording
-    from plantreg_gui.core.register import Registrar
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.data.recording import Recording
+    from plantreg_gui.core.registration.register import Registrar
+    from plantreg_gui.core.camera.rig import Rig
 
     rig = Rig.load(data / "rig.json")
     t0 = time.perf_counter()
@@ -59,7 +59,7 @@ def _child(data: Path, target: str, repeat: int) -> None:
              for name, img in rec.images.items()}
 
     t0 = time.perf_counter()
-    from plantreg_gui.core.o3d_core import open3d_core  # one-time library start-up, loaded lazily by the engine
+    from plantreg_gui.core.geometry.o3d_core import open3d_core  # one-time library start-up, loaded lazily by the engine
 
     open3d_core()
     t_import = time.perf_counter() - t0

@@ -23,8 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_rigfit import FREE_FOCAL, SOURCES, landmark_recordings, scene_depth  # noqa: E402
 
-from plantreg_gui.core.landmarks import Landmark  # noqa: E402
-from plantreg_gui.core.rigfit import RecordingLandmarks, fit_rig  # noqa: E402
+from plantreg_gui.core.data.landmarks import Landmark  # noqa: E402
+from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, fit_rig  # noqa: E402
 from plantreg_gui.core.synthetic import demo_rig, ground_truth  # noqa: E402
 from plantreg_gui.core.synthetic.landmarks import perturb_rig  # noqa: E402
 

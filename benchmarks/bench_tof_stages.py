@@ -8,7 +8,7 @@ holes on steep surfaces, 1 mm + 0.1 % noise: ``render_tof_depth``), rendered onc
 Each repetition builds a fresh ``Registrar`` and registers into the infrared; the added stages
 are timed by wrapping their functions:
 
-* depth clean-up (``core/depthfilter.py``): flying-pixel detection, snapping flying pixels,
+* depth clean-up (``core/geometry/depthfilter.py``): flying-pixel detection, snapping flying pixels,
   hole filling, denoising;
 * mixed-pixel flags (``core/mixed.silhouette_distance``), once per source camera.
 
@@ -36,10 +36,11 @@ def main() -> int:
 
     import numpy as np
 
-    from plantreg_gui.core import depthfilter, mixed
-    from plantreg_gui.core.o3d_core import open3d_core
-    from plantreg_gui.core.recording import Recording
-    from plantreg_gui.core.register import Registrar
+    from plantreg_gui.core.geometry import depthfilter
+    from plantreg_gui.core.registration import mixed
+    from plantreg_gui.core.geometry.o3d_core import open3d_core
+    from plantreg_gui.core.data.recording import Recording
+    from plantreg_gui.core.registration.register import Registrar
     from plantreg_gui.core.synthetic import demo_rig, make_plant_scene
     from plantreg_gui.core.synthetic.render import render_tof_depth
 

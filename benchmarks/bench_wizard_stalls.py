@@ -3,7 +3,7 @@
     PYTHONPATH=. .venv/bin/python benchmarks/bench_wizard_stalls.py [--set demo|stereo|both]
                                                                     [--data DIR] [--trace]
 
-A :class:`~plantreg_gui.gui.stall_probe.StallProbe` (20 ms timer on the GUI thread) runs while
+A :class:`~stall_probe.StallProbe` (20 ms timer on the GUI thread) runs while
 the wizard, shown on screen (use ``xvfb-run -a`` without a display), does each step as a
 technician would: open a session and detect corners (page 2), calibrate (page 4), compute the
 error tables (page 5), go to page 7; then a fresh wizard *resumes* the saved session on page 7
@@ -27,6 +27,8 @@ import argparse
 import collections
 import shutil
 import sys
+
+sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1] / "tests"))  # stall_probe
 import tempfile
 import threading
 import time
@@ -86,7 +88,7 @@ def _run_until(app, cond, timeout_s: float) -> None:
 
 
 def _step(app, name: str, action, cond, trace: bool, rows: list) -> None:
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     probe = StallProbe()
     t0 = time.perf_counter()

@@ -104,7 +104,7 @@ def _is_ours(entry: Path) -> bool:
 
 
 def _write(path: Path, data: bytes) -> None:
-    from .core.imageio import atomic_path
+    from .core.io.imageio import atomic_path
 
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:

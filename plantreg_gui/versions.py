@@ -25,8 +25,8 @@ def dist_version(module: str, dist: str | None = None) -> str | None:
     """The installed version of distribution ``dist`` (default: named like ``module``) whose
     import package ``module`` is, None if not installed; from the name of its
     ``<dist>-<version>.dist-info`` folder beside the module, without importing it. Why:
-    ``importlib.metadata`` imports the ``email`` package and parses METADATA files: ~40-70 ms of
-    a paper-sized ``plantreg register`` (its summary is written on the critical path)."""
+    ``importlib.metadata`` imports the ``email`` package and parses METADATA files: a share of a
+    paper-sized ``plantreg register`` (its summary is written on the critical path)."""
     import importlib.util
 
     dist = dist or module

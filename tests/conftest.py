@@ -42,7 +42,7 @@ def demo_registered(demo_dir):
     return it (Qt-free): ``{"loaded": load_job output, "registered": register_job output}``.
     Apply copies with :func:`workspace_session_outputs`; never mutate these."""
     from plantreg_gui.core.progress import Reporter
-    from plantreg_gui.gui.registration.session import load_job, register_job
+    from plantreg_gui.models.registration import load_job, register_job
 
     loaded = load_job(demo_dir / "rig.json", demo_dir / "recording", None, {}, progress=Reporter())
     registered = register_job(None, loaded["rig"], loaded["recording"], "ir", {}, progress=Reporter())

@@ -19,12 +19,12 @@ import pytest
 import tifffile
 
 from plantreg_gui.cli import main
-from plantreg_gui.core import batch
+from plantreg_gui.core.pipeline import batch
 from plantreg_gui.core.errors import InputError
-from plantreg_gui.core.imageio import TIFF_CODECS, dense_tiles, write_tiff_tiled
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.register import Registrar
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.io.imageio import TIFF_CODECS, dense_tiles, write_tiff_tiled
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.registration.register import Registrar
+from plantreg_gui.core.camera.rig import Rig
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -279,7 +279,7 @@ def test_tiled_compressed_tiff_decodes_bit_identically(tmp_path, codec, shape):
 def test_registered_tiff_and_ply_hold_the_result_bit_for_bit(demo_dir, tmp_path):
     from plyfile import PlyData
 
-    from plantreg_gui.core.export import ply_property_names, write_outputs
+    from plantreg_gui.core.export.export import ply_property_names, write_outputs
 
     rig = Rig.load(demo_dir / "rig.json")
     rec = Recording.load(demo_dir / "recording", rig)
@@ -317,8 +317,8 @@ def test_outputs_option(demo_dir, tmp_path, capsys):
 def test_colour_tables_match_matplotlib():
     import matplotlib
 
-    from plantreg_gui.core.cmap_tables import TABLES
-    from plantreg_gui.core.display import colormap_lut
+    from plantreg_gui.core.display.cmap_tables import TABLES
+    from plantreg_gui.core.display.display import colormap_lut
 
     for name in TABLES:
         ref = (matplotlib.colormaps[name](np.linspace(0.0, 1.0, 256))[:, :3] * 255.0 + 0.5).astype(np.uint8)
@@ -332,7 +332,7 @@ def test_register_does_not_import_what_it_does_not_use(demo_dir, tmp_path):
     p = subprocess.run(cmd, env=_env(), capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr[-2000:]
     imported = {line.split("|")[-1].strip() for line in p.stderr.splitlines() if line.startswith("import time:")}
-    assert "plantreg_gui.core.register" in imported  # the check sees the run's imports
+    assert "plantreg_gui.core.registration.register" in imported  # the check sees the run's imports
     # importlib.metadata: ~50 ms (with the email package) only to look up package versions
     for mod in ("dash", "plotly", "flask", "IPython", "matplotlib", "scipy.interpolate", "open3d.visualization",
                 "PySide6", "pyvista", "importlib.metadata"):
@@ -355,10 +355,10 @@ def test_hit_images_equal_the_dense_registration(demo_dir, tmp_path, monkeypatch
     them (dense, blocks, pixels, the written TIFF and PLY, previews) gives the dense result."""
     from plyfile import PlyData
 
-    from plantreg_gui.core import register as register_mod
-    from plantreg_gui.core.display import to_rgb8
-    from plantreg_gui.core.export import write_outputs
-    from plantreg_gui.core.hits import HitImage
+    from plantreg_gui.core.registration import register as register_mod
+    from plantreg_gui.core.display.display import to_rgb8
+    from plantreg_gui.core.export.export import write_outputs
+    from plantreg_gui.core.registration.hits import HitImage
 
     rig = Rig.load(demo_dir / "rig.json")
     rec = Recording.load(demo_dir / "recording", rig)

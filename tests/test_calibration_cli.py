@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from plantreg_gui.cli import main
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.camera.rig import Rig
 
 
 @pytest.fixture(scope="module")
@@ -173,7 +173,7 @@ def test_failed_rig_write_leaves_no_report_and_no_traceback(shared_data, tmp_pat
     out = tmp_path / "out"
     out.mkdir()
 
-    from plantreg_gui.core import imageio
+    from plantreg_gui.core.io import imageio
 
     real_replace = os.replace
 

@@ -15,7 +15,7 @@ import pytest
 from plantreg_gui.core.calibration import (Board, DetectOptions, Session, detect_image, detect_session,
                                            suggest_board_size)
 from plantreg_gui.core.calibration.synthetic import _CamRays, _rot, render_board
-from plantreg_gui.core.camera import Camera
+from plantreg_gui.core.camera.camera import Camera
 from plantreg_gui.core.errors import InputError
 
 CAM = Camera("c", "visible", 640, 480, [[600, 0, 322], [0, 600, 238], [0, 0, 1]], [0.05, -0.02, 0, 0, 0])
@@ -188,7 +188,7 @@ def test_charuco_session_end_to_end(tmp_path):
     partial views count; the calibration recovers the truth."""
     from plantreg_gui.core.calibration import calibrate, error_tables, read_truth, write_calibration_session
     from plantreg_gui.core.calibration.synthetic import example_rig
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
 
     full = example_rig()
     rig = Rig([full.camera("ir"), full.camera("thermal")], "ir")
@@ -220,7 +220,7 @@ def test_depth_table_is_near_zero_without_tof_bias(tmp_path):
     recovered bias."""
     from plantreg_gui.core.calibration import calibrate, error_tables, write_calibration_session
     from plantreg_gui.core.calibration.synthetic import example_rig
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
 
     full = example_rig()
     rig = Rig([full.camera("ir"), full.camera("thermal"), full.camera("hyperspectral")], "ir")

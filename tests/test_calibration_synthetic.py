@@ -15,7 +15,7 @@ import pytest
 from plantreg_gui.core.calibration import (FAILED, Session, calibrate, calibrated_rig, detect_session,
                                            error_tables, read_truth)
 from plantreg_gui.core.errors import InputError
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.camera.rig import Rig
 
 
 def _angle_deg(R: np.ndarray) -> float:
@@ -126,8 +126,9 @@ def test_extrinsic_and_depth_tables(solved):
 
 def test_registration_with_calibrated_rig(demo_dir, solved):
     """Register the demo plant with the *calibrated* rig: source pixels vs the true ones."""
-    from plantreg_gui.core.recording import Recording
-    from plantreg_gui.core.register import CASE_P1, Registrar
+    from plantreg_gui.core.data.recording import Recording
+    from plantreg_gui.core.registration.register import Registrar
+    from plantreg_gui.core.registration.cases import Case
     from plantreg_gui.core.synthetic import GroundTruth
 
     session, _truth, _d, cal, report = solved
@@ -138,7 +139,7 @@ def test_registration_with_calibrated_rig(demo_dir, solved):
     gt = GroundTruth.load(demo_dir / "ground_truth" / "ir.npz")
     result = Registrar(rig, recording).register("ir")
     for src in ("rgb", "thermal", "hyperspectral"):
-        m = (result.cases[src] == CASE_P1) & gt.matchable[src]
+        m = (result.cases[src] == Case.P1) & gt.matchable[src]
         assert m.sum() > 1000, src
         err = np.linalg.norm(result.source_uv[src][m] - gt.uv[src][m], axis=1)
         assert np.median(err) < 0.5, (src, np.median(err))

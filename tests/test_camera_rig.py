@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from plantreg_gui.core.camera import Camera
+from plantreg_gui.core.camera.camera import Camera
 from plantreg_gui.core.errors import InputError
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.camera.rig import Rig
 
 
 def _cam(**kw):
@@ -92,7 +92,7 @@ def test_multiband_tiff_is_band_last_in_either_layout(tmp_path, planar):
     band-separate (GDAL's INTERLEAVE=BAND), with each band's values where they were written."""
     import tifffile
 
-    from plantreg_gui.core.imageio import read_image
+    from plantreg_gui.core.io.imageio import read_image
 
     cube = np.arange(40 * 30 * 5, dtype=np.float32).reshape(40, 30, 5)
     data = cube if planar == "contig" else np.moveaxis(cube, -1, 0)

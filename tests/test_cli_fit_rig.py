@@ -10,10 +10,10 @@ import pytest
 import tifffile
 
 from plantreg_gui import cli
-from plantreg_gui.core.camera import Camera
-from plantreg_gui.core.landmarks import LandmarkSet
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.camera.camera import Camera
+from plantreg_gui.core.data.landmarks import LandmarkSet
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.camera.rig import Rig
 from plantreg_gui.core.synthetic import demo_rig, make_plant_scene, render_depth
 from plantreg_gui.core.synthetic.landmarks import perturb_rig, synthetic_landmarks
 

@@ -13,10 +13,11 @@ import tifffile
 from plyfile import PlyData
 
 from plantreg_gui import cli
-from plantreg_gui.core import register as register_mod
-from plantreg_gui.core.camera import Camera
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.pipeline import pipeline as pipeline_mod
+from plantreg_gui.core.registration import register as register_mod
+from plantreg_gui.core.camera.camera import Camera
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.camera.rig import Rig
 
 W, H = 40, 30
 
@@ -155,7 +156,7 @@ def test_existing_output_is_refused_before_any_work(tmp_path, capsys, monkeypatc
     def never(*a, **k):
         raise AssertionError("registration must not start")
 
-    monkeypatch.setattr(register_mod, "Registrar", never)
+    monkeypatch.setattr(pipeline_mod, "Registrar", never)
     code = cli.main(_args(rig, rec, out))
     err = capsys.readouterr().err
     assert code == 1 and str(out) in err and "not empty" in err and "--overwrite" in err
@@ -172,7 +173,7 @@ def test_overwrite_never_replaces_the_inputs(tmp_path, capsys, monkeypatch, wher
     def never(*a, **k):
         raise AssertionError("registration must not start")
 
-    monkeypatch.setattr(register_mod, "Registrar", never)
+    monkeypatch.setattr(pipeline_mod, "Registrar", never)
     out = rec if where == "recording" else tmp_path
     code = cli.main(_args(rig, rec, out, "ir", "--overwrite"))
     err = capsys.readouterr().err
@@ -186,7 +187,7 @@ def test_output_under_a_file_is_refused_before_any_work(tmp_path, capsys, monkey
     def never(*a, **k):
         raise AssertionError("registration must not start")
 
-    monkeypatch.setattr(register_mod, "Registrar", never)
+    monkeypatch.setattr(pipeline_mod, "Registrar", never)
     code = cli.main(_args(rig, rec, rig / "out"))  # the rig file is not a folder
     err = capsys.readouterr().err
     assert code == 1 and str(rig) in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
@@ -196,10 +197,10 @@ def test_os_error_while_writing_is_one_line(tmp_path, capsys, monkeypatch):
     """Disk full / no permission while writing: one line naming the file, exit 1, no folder left."""
     import errno
 
-    from plantreg_gui.core import export
+    from plantreg_gui.core.export import export
 
     rig, rec = _write_inputs(tmp_path)
-    monkeypatch.setattr(register_mod, "Registrar", _FakeRegistrar)
+    monkeypatch.setattr(pipeline_mod, "Registrar", _FakeRegistrar)
 
     def full(path, *args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
@@ -217,7 +218,7 @@ def test_recording_given_as_its_manifest(tmp_path, capsys, monkeypatch):
     """--recording DIR/recording.json means DIR (as calibrate accepts SESSION/session.json),
     not 'recording folder not found' for a file that exists."""
     rig, rec = _write_inputs(tmp_path)
-    monkeypatch.setattr(register_mod, "Registrar", _FakeRegistrar)
+    monkeypatch.setattr(pipeline_mod, "Registrar", _FakeRegistrar)
     code = cli.main(_args(rig, rec / "recording.json", tmp_path / "out"))
     assert code == 0, capsys.readouterr().err
     assert _FakeRegistrar.seen["recording"].folder == rec
@@ -299,7 +300,7 @@ class _FakeRegistrar:
 
 def test_good_run_writes_the_folder_and_prints_case_shares(tmp_path, capsys, monkeypatch):
     rig, rec = _write_inputs(tmp_path)
-    monkeypatch.setattr(register_mod, "Registrar", _FakeRegistrar)
+    monkeypatch.setattr(pipeline_mod, "Registrar", _FakeRegistrar)
     out = tmp_path / "out"
     code = cli.main(["register", "--rig", str(rig), "--recording", str(rec), "--target", "thermal",
                      "--out", str(out), "--edge-angle", "20"])
@@ -358,7 +359,7 @@ def demo_ir(demo, tmp_path_factory):
 
 
 def test_demo_output_layout_and_types(demo, demo_ir):
-    from plantreg_gui.core.imageio import read_image
+    from plantreg_gui.core.io.imageio import read_image
 
     out, so, se = demo_ir
     rig = Rig.load(demo["rig"])
@@ -411,7 +412,7 @@ def test_demo_pointcloud_is_the_true_surface(demo, demo_ir):
 
 
 def test_demo_case_maps_agree_with_ground_truth_and_summary(demo, demo_ir):
-    from plantreg_gui.core.imageio import read_image
+    from plantreg_gui.core.io.imageio import read_image
     from plantreg_gui.core.synthetic import GroundTruth
 
     out, so, _ = demo_ir

@@ -5,8 +5,8 @@ import warnings
 import numpy as np
 import pytest
 
-from plantreg_gui.core import display
-from plantreg_gui.core.display import (
+from plantreg_gui.core.display import display
+from plantreg_gui.core.display.display import (
     AREA_COLOURS, BACKGROUND_RGB, CASE_COLOURS, auto_limits, blend, checkerboard, mosaic, overlay,
     pca_false_colour, pca_scores, to_rgb8,
 )
@@ -298,7 +298,7 @@ def test_three_band_8bit_cube_is_drawn_as_rgb_raw_and_registered():
     """A hyperspectral camera's own 3-band 8-bit rendering (the Plant3DImageReg 'hs' PNGs) was drawn
     as a PCA false colour: a grey background came out green. It is RGB now, as recorded; its
     registered version (float32, NaN where not mapped) too, with the hues kept."""
-    from plantreg_gui.gui.registration.model import pca_basis
+    from plantreg_gui.models.layers import pca_basis
 
     raw = np.empty((20, 30, 3), np.uint8)
     raw[:] = (120, 120, 120)             # grey background

@@ -12,13 +12,15 @@ import pytest
 import tifffile
 
 from plantreg_gui import cli
-from plantreg_gui.core import register as register_mod
+from plantreg_gui.core.registration import register as register_mod
 from plantreg_gui.core.errors import Cancelled
-from plantreg_gui.core.export import EarlyTiffs, write_outputs
-from plantreg_gui.core.hits import HitImage
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.register import Registrar, sample_bilinear
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.export.export import EarlyTiffs, write_outputs
+from plantreg_gui.core.registration.hits import HitImage
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.registration import sampling
+from plantreg_gui.core.registration.register import Registrar
+from plantreg_gui.core.registration.sampling import sample_bilinear
+from plantreg_gui.core.camera.rig import Rig
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -58,7 +60,7 @@ def test_cube_sampled_in_threads_is_the_sequential_sampling(seed, monkeypatch):
     rows = np.sort(rng.choice(n + 500, n, replace=False))
     got = {}
     for threads in (1, 3):
-        monkeypatch.setattr(register_mod, "SAMPLE_THREADS", threads)
+        monkeypatch.setattr(sampling, "SAMPLE_THREADS", threads)
         plain = sample_bilinear(cube, uv)
         out = np.full((n + 500, C), 7.0, np.float32)  # rows not sampled must become NaN
         sample_bilinear(cube, uv, out=out, rows=rows)
@@ -140,7 +142,7 @@ def test_early_tiffs_stop_and_clean_up_on_an_error(tmp_path):
             raise RuntimeError("registration failed")
     assert list(tmp_path.iterdir()) == []
     # the stop flag ends a running encoding with Cancelled (the file is not written)
-    from plantreg_gui.core.export import _write_registered_tiff
+    from plantreg_gui.core.export.export import _write_registered_tiff
     import threading
 
     stop = threading.Event()
@@ -188,7 +190,7 @@ def test_hit_image_being_filled_waits_for_its_rows():
     stops with Cancelled when the filler fails."""
     import threading
 
-    from plantreg_gui.core.hits import RowsReady
+    from plantreg_gui.core.registration.hits import RowsReady
 
     H, W, B = 64, 48, 3
     idx = np.arange(0, H * W, 2)

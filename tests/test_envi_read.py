@@ -1,4 +1,4 @@
-"""The ENVI cube reader (core/imageio.py) returns what spectral's own ``load()`` returns -- same
+"""The ENVI cube reader (core/io/imageio.py) returns what spectral's own ``load()`` returns -- same
 values, dtype and shape -- for every interleave, several dtypes and both byte orders, without
 spectral's copies; and a data file shorter than its header is refused naming the file."""
 
@@ -13,7 +13,7 @@ import pytest
 def test_envi_cube_reads_as_spectral_loads_it(tmp_path, interleave, dtype):
     import spectral.io.envi as envi
 
-    from plantreg_gui.core.imageio import read_image
+    from plantreg_gui.core.io.imageio import read_image
 
     rng = np.random.default_rng(7)
     cube = (rng.random((9, 11, 5)) * 1000).astype(dtype)
@@ -32,7 +32,7 @@ def test_envi_data_shorter_than_its_header_is_refused(tmp_path):
     import spectral.io.envi as envi
 
     from plantreg_gui.core.errors import InputError
-    from plantreg_gui.core.imageio import read_image
+    from plantreg_gui.core.io.imageio import read_image
 
     hdr = tmp_path / "cube.hdr"
     envi.save_image(str(hdr), np.ones((8, 8, 4), np.float32), interleave="bsq", force=True)

@@ -10,15 +10,15 @@ import pytest
 import tifffile
 from plyfile import PlyData
 
-from plantreg_gui.core import export
-from plantreg_gui.core.camera import Camera
-from plantreg_gui.core.display import BACKGROUND_RGB
+from plantreg_gui.core.export import export
+from plantreg_gui.core.camera.camera import Camera
+from plantreg_gui.core.display.display import BACKGROUND_RGB
 from plantreg_gui.core.errors import Cancelled, InputError
-from plantreg_gui.core.export import OUTPUTS, write_outputs
+from plantreg_gui.core.export.export import OUTPUTS, write_outputs
 from plantreg_gui.core.progress import CancelToken, Reporter
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.register import RegistrationParams, RegistrationResult
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.registration.register import RegistrationParams, RegistrationResult
+from plantreg_gui.core.camera.rig import Rig
 
 H, W = 30, 40
 R0, R1, C0, C1 = 5, 25, 8, 32  # the object: rows R0..R1-1, cols C0..C1-1 (20 x 24 = 480 pixels)
@@ -214,7 +214,7 @@ def test_existing_output_is_refused_and_replaced_only_on_request(tmp_path):
 def test_overwrite_never_replaces_the_rig_or_recording(tmp_path):
     """An export into the folder that holds the rig file (as the GUI passes it: a str) or the
     recording is refused even with overwrite: replacing the folder would delete the inputs."""
-    from plantreg_gui.core.recording import Recording
+    from plantreg_gui.core.data.recording import Recording
 
     rig, res = _result()
     rig_path = tmp_path / "rig.json"
@@ -366,7 +366,7 @@ def test_hit_tiles_answer_every_block_as_the_dense_image(bands, tmp_path):
     """The TIFF writer's blocks of a HitImage (occupancy grid + block) are the dense image's
     blocks, None exactly where the block holds no hit -- aligned tiles and any other block;
     the written TIFF decodes to the dense image."""
-    from plantreg_gui.core.hits import HitImage
+    from plantreg_gui.core.registration.hits import HitImage
 
     rng = np.random.default_rng(bands)
     H, W = 203, 317

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from plantreg_gui.core import export
+from plantreg_gui.core.export import export
 from plantreg_gui.core.errors import InputError
 from plantreg_gui.core.progress import Reporter
 
@@ -26,7 +26,7 @@ def test_default_parts_and_cli_names():
     assert export.OUTPUT_PARTS[-1].key == "summary"  # lists the files written before it
     assert export.parse_outputs("ply,cases") == ("cases", "pointcloud")
     assert export.parse_outputs(None) == export.OUTPUTS
-    with pytest.raises(InputError, match="choose from registered,previews,cases,edges,areas,ply,mosaic,summary"):
+    with pytest.raises(InputError, match="choose from registered,previews,cases,edges,flying,areas,ply,mosaic,summary"):
         export.parse_outputs("nope")
 
 

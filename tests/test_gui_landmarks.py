@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QPointF, Qt
 
-from plantreg_gui.core.landmark_session import LandmarkSession
-from plantreg_gui.core.landmarks import LandmarkSet
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.rig import Rig
-from plantreg_gui.core.rigfit import RecordingLandmarks, evaluate_landmarks
+from plantreg_gui.models.landmarks import LandmarkSession
+from plantreg_gui.core.data.landmarks import LandmarkSet
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.camera.rig import Rig
+from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, evaluate_landmarks
 from plantreg_gui.core.synthetic import make_plant_scene
 from plantreg_gui.core.synthetic.landmarks import perturb_rig, synthetic_landmarks
 
@@ -67,7 +67,7 @@ def page(qtbot, demo, tmp_path):
 
 
 def test_click_pairs_fit_overlay_nudge_save(qtbot, page, demo, tmp_path):
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     rig, rec, scene = demo
     s = page.session
@@ -147,7 +147,7 @@ def test_click_pairs_fit_overlay_nudge_save(qtbot, page, demo, tmp_path):
 
 def _refine_available() -> bool:
     try:
-        import plantreg_gui.core.refine  # noqa: F401
+        import plantreg_gui.core.rigfit.refine  # noqa: F401
     except ImportError:
         return False
     return True
@@ -156,7 +156,7 @@ def _refine_available() -> bool:
 def test_refine_runs_on_a_worker_with_progress_and_cancel(qtbot, page, demo):
     """The Refine button: on a worker, progress shown, cancel honoured, result applied (undoable).
 
-    With core/refine.py present the real refinement runs on the demo's textured images; without it
+    With core/rigfit/refine.py present the real refinement runs on the demo's textured images; without it
     (it lands from another branch) the page must say so instead of failing."""
     rig, rec, scene = demo
     s = page.session
@@ -165,8 +165,8 @@ def test_refine_runs_on_a_worker_with_progress_and_cancel(qtbot, page, demo):
 
         with pytest.raises(InputError, match="not available"):
             s.refine_job()
-        pytest.xfail("core/refine.py (issue 8 part 2) is not merged into this branch yet")
-    from plantreg_gui.core.refine import RefineParams
+        pytest.xfail("core/rigfit/refine.py (issue 8 part 2) is not merged into this branch yet")
+    from plantreg_gui.core.rigfit.refine import RefineParams
 
     before = unseen_px(rig, s.rig, scene, rec)
     # cancel: the worker stops at its next progress call and the rig stays as it was
@@ -289,7 +289,7 @@ def test_report_heading_says_whether_the_opened_rig_was_fitted(qtbot, page, demo
     """The report pane's heading: the shipped Plant3DImageReg rig was fitted by ``plantreg
     fit-rig`` (its file says so) and must not be called "not fitted yet"; after a nudge it is no
     longer the rig as opened (before, both read "as opened (not fitted yet)")."""
-    from plantreg_gui.core.landmark_session import LandmarkSession
+    from plantreg_gui.models.landmarks import LandmarkSession
     from plantreg_gui.gui.landmarks.page import LandmarkPage
 
     rig, rec, scene = demo
@@ -317,7 +317,7 @@ def test_views_show_colour_bars_and_the_value_under_the_cursor(qtbot, page, demo
     read-out (Layer.value_text): the thermal view has a °C scale, the depth camera's infrared a
     unitless one, a colour camera none; moving the mouse over a view reads that image's pixel
     (before, none of it: clicking leaf corners on a thermal image without a temperature scale)."""
-    from plantreg_gui.core import display
+    from plantreg_gui.core.display import display
 
     rig, rec, scene = demo
     th = np.asarray(rec.images[CAM])

@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from plantreg_gui.core.recording import Recording
+from plantreg_gui.core.data.recording import Recording
 
 pytestmark = pytest.mark.gui
 
@@ -56,7 +56,7 @@ def _spy(monkeypatch, owner, name, on_gui_thread: list, delay_s: float = 0.0) ->
 
 def test_open_reads_the_recordings_on_a_worker(qtbot, page, demo_dir, tmp_path, monkeypatch):
     import plantreg_gui.gui.landmarks.page as page_module
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     reads, conversions = [], []
     _spy(monkeypatch, Recording, "load", reads)
@@ -160,7 +160,7 @@ def test_refine_runs_in_a_child_process_and_cancel_stops_it(qtbot, page, demo_di
 
 
 def test_refine_in_a_child_process_returns_its_result(qtbot, page, demo_dir, tmp_path):
-    from plantreg_gui.core.refine import RefineParams
+    from plantreg_gui.core.rigfit.refine import RefineParams
     from plantreg_gui.gui.workers import Worker
 
     page.open(demo_dir / "rig.json", tmp_path / "landmarks.json", [demo_dir / "recording"])
@@ -189,7 +189,7 @@ def test_session_load_reads_every_recording_and_is_cancellable(demo_dir, tmp_pat
     """The worker's routine (Qt-free): every recording and its depth map read on return (nothing
     left for the GUI thread to read later), a cancel honoured between the reads."""
     from plantreg_gui.core.errors import Cancelled, InputError
-    from plantreg_gui.core.landmark_session import LandmarkSession
+    from plantreg_gui.models.landmarks import LandmarkSession
     from plantreg_gui.core.progress import CancelToken, Reporter
 
     msgs = []

@@ -24,7 +24,7 @@ from conftest import workspace_session_outputs
 
 # ---------------------------------------------------------------------- the model, without Qt
 def test_session_is_qt_free():
-    code = ("import sys; import plantreg_gui.gui.registration.session, plantreg_gui.gui.registration.model; "
+    code = ("import sys; import plantreg_gui.models.registration, plantreg_gui.models.layers; "
             "bad = [m for m in sys.modules if m.startswith(('PySide6', 'shiboken6', 'pyvista'))]; "
             "print(bad); sys.exit(1 if bad else 0)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -33,8 +33,8 @@ def test_session_is_qt_free():
 
 
 def test_session_events_and_readout(demo_registered):
-    from plantreg_gui.core.cases import case_label
-    from plantreg_gui.gui.registration.session import RegistrationSession
+    from plantreg_gui.core.registration.cases import case_label
+    from plantreg_gui.models.registration import RegistrationSession
 
     s = RegistrationSession()
     seen = []
@@ -63,9 +63,9 @@ def test_session_events_and_readout(demo_registered):
 
 
 def test_display_settings_rerender_every_place(demo_registered):
-    from plantreg_gui.core import display
-    from plantreg_gui.gui.registration.model import DisplaySettings
-    from plantreg_gui.gui.registration.session import RegistrationSession
+    from plantreg_gui.core.display import display
+    from plantreg_gui.models.layers import DisplaySettings
+    from plantreg_gui.models.registration import RegistrationSession
 
     s = RegistrationSession()
     loaded, reg = workspace_session_outputs(demo_registered)
@@ -87,7 +87,7 @@ def test_display_settings_rerender_every_place(demo_registered):
 
 
 def test_spectrum_on_an_unmapped_pixel_says_so(demo_registered):
-    from plantreg_gui.gui.registration.session import RegistrationSession
+    from plantreg_gui.models.registration import RegistrationSession
 
     s = RegistrationSession()
     loaded, reg = workspace_session_outputs(demo_registered)
@@ -105,8 +105,8 @@ def test_readout_of_a_3_band_cube_gives_its_three_values():
     """A 3-band cube (the real Plant3DImageReg hyperspectral renders, 8-bit) is drawn as RGB, so its
     read-out gives the three values as a colour camera's does (before: "17 @ band 0 (3 bands)");
     a true many-band cube keeps "value @ band k (N bands)"."""
-    from plantreg_gui.gui.registration.model import Layer
-    from plantreg_gui.gui.registration.session import RegistrationSession
+    from plantreg_gui.models.layers import Layer
+    from plantreg_gui.models.registration import RegistrationSession
 
     rng = np.random.default_rng(0)
     hs3 = rng.integers(0, 256, (6, 8, 3), dtype=np.uint8)
@@ -130,8 +130,8 @@ def test_readout_of_a_3_band_cube_gives_its_three_values():
 def test_layer_titles_say_each_thing_once():
     """A camera named after its modality does not repeat it (the hyperspectral title was cut off
     at the edge of a side-by-side view); other cameras keep their modality, units and bands."""
-    from plantreg_gui.gui.registration.model import Layer
-    from plantreg_gui.gui.registration.session import RegistrationSession
+    from plantreg_gui.models.layers import Layer
+    from plantreg_gui.models.registration import RegistrationSession
 
     s = RegistrationSession()
     cube = Layer("hyperspectral", "hyperspectral", np.zeros((576, 640, 100), np.float32))
@@ -147,7 +147,7 @@ def test_layer_titles_say_each_thing_once():
 
 @pytest.mark.gui
 def test_views_show_the_session(registered_workspace):
-    from plantreg_gui.core import display
+    from plantreg_gui.core.display import display
 
     w = registered_workspace
     r = w.result
@@ -170,7 +170,7 @@ def test_registration_keeps_the_gui_thread_responsive(registered_workspace, qtbo
     on an overloaded 2-core machine the GUI thread waits for a CPU, not for our code (measured: a
     load of 14 per core stretches 0.2 s to ~2 s). The freezes this guards against took 1-12 s
     on an idle machine."""
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     w = registered_workspace
     load = os.getloadavg()[0] / (os.cpu_count() or 1)
@@ -324,8 +324,8 @@ def test_hyperspectral_false_colour_is_the_same_raw_and_registered(demo_register
     """Defect 10: the PCA false colour was fitted separately on the raw and the registered cube, so
     one leaf had two colours. Both now use the raw cube's basis: a registered pixel has the colour
     of the raw pixel it was sampled from."""
-    from plantreg_gui.core import display
-    from plantreg_gui.gui.registration.session import RegistrationSession
+    from plantreg_gui.core.display import display
+    from plantreg_gui.models.registration import RegistrationSession
 
     s = RegistrationSession()
     loaded, reg = workspace_session_outputs(demo_registered)
@@ -360,7 +360,7 @@ def test_registration_parameters_in_the_gui(registered_workspace):
 
 @pytest.mark.gui
 def test_display_settings_are_remembered(registered_workspace, qtbot):
-    from plantreg_gui.gui.registration.model import DisplaySettings
+    from plantreg_gui.models.layers import DisplaySettings
     from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
 
     w = registered_workspace
@@ -376,8 +376,8 @@ def test_display_settings_are_remembered(registered_workspace, qtbot):
 
 @pytest.mark.gui
 def test_colour_bars_give_the_limits_in_units(registered_workspace, qtbot):
-    from plantreg_gui.core import display
-    from plantreg_gui.gui.registration.model import DisplaySettings
+    from plantreg_gui.core.display import display
+    from plantreg_gui.models.layers import DisplaySettings
 
     w = registered_workspace
     r = w.result

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plantreg_gui.core import export
+from plantreg_gui.core.export import export
 
 from test_export_registry import _extra_part
 
@@ -46,7 +46,7 @@ def _drag(qtbot, view, a, b):
 def test_region_rectangle_gives_the_sources_statistics_and_csv(registered_workspace, qtbot, tmp_path, monkeypatch):
     import csv
 
-    from plantreg_gui.core.cases import Case
+    from plantreg_gui.core.registration.cases import Case
 
     ws = registered_workspace
     s = ws.session
@@ -102,7 +102,7 @@ def test_region_rectangle_gives_the_sources_statistics_and_csv(registered_worksp
 def test_region_polygon_by_clicks(registered_workspace, qtbot):
     from PySide6.QtCore import QPointF, Qt
 
-    from plantreg_gui.core.region import region_mask
+    from plantreg_gui.core.registration.region import region_mask
 
     ws = registered_workspace
     s = ws.session
@@ -206,7 +206,7 @@ def _choose_layer(ws, name):
 
 
 def test_absolute_limits_are_drawn_and_locked_across_recordings(registered_workspace, qtbot, demo_dir):
-    from plantreg_gui.core import display
+    from plantreg_gui.core.display import display
     from plantreg_gui.gui.registration.workspace import RegistrationWorkspace
 
     ws = registered_workspace
@@ -253,8 +253,8 @@ def test_switching_to_absolute_limits_does_not_recompute_the_percentiles(registe
     """Absolute limits start from the limits the percentiles gave -- the colour bar's, remembered,
     not computed again -- and a cube kept as a HitImage (4K cubes) is never expanded to a dense
     array for them. Truth: numpy percentiles of the layer's finite values."""
-    from plantreg_gui.core import display
-    from plantreg_gui.core.hits import HitImage
+    from plantreg_gui.core.display import display
+    from plantreg_gui.core.registration.hits import HitImage
 
     ws = registered_workspace
     s = ws.session
@@ -290,7 +290,7 @@ def test_cube_as_names_what_a_three_band_cube_is_drawn_as(qtbot):
     """A 3-band hyperspectral image (a camera's 8-bit render) is drawn as RGB, so the default of
     "Cube as" says so; a many-band cube's default stays the PCA false colour."""
     from plantreg_gui.gui.registration.display_controls import DisplayControls
-    from plantreg_gui.gui.registration.model import Layer
+    from plantreg_gui.models.layers import Layer
 
     c = DisplayControls()
     qtbot.addWidget(c)
@@ -329,7 +329,7 @@ def test_band_pickers_in_nm(registered_workspace, qtbot):
 def test_wizard_modalities_come_from_the_registry():
     from pathlib import Path
 
-    from plantreg_gui.core import modality
+    from plantreg_gui.core.camera import modality
     from plantreg_gui.gui.calibration import rig_page
 
     assert rig_page.MODALITIES == modality.names()
@@ -340,7 +340,7 @@ def test_wizard_modalities_come_from_the_registry():
 def test_alias_removed_and_3d_view_without_auto_update(qtbot):
     from PySide6.QtWidgets import QWidget
 
-    from plantreg_gui.core import imageio
+    from plantreg_gui.core.io import imageio
     from plantreg_gui.gui.plotter3d import first_frame_held, make_plotter, release_first_frame
 
     assert not hasattr(imageio, "atomic_path_suffixed")
@@ -364,7 +364,7 @@ def test_region_statistics_keep_the_gui_thread_responsive(registered_workspace, 
     core when above 1 (the GUI thread then waits for a CPU, not for our code)."""
     import os
 
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     ws = registered_workspace
     s = ws.session
@@ -389,7 +389,7 @@ def test_first_show_of_the_3d_tab_is_staged_and_complete(registered_workspace, q
     per core when above 1. (Before: one 265-374 ms gap on the idle machine.)"""
     import os
 
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     ws = registered_workspace
     s = ws.session
@@ -443,7 +443,7 @@ def test_wizard_frusta_view_is_drawn_in_stages(qapp, qtbot, no_qt_leaks):
 
     from plantreg_gui.core.synthetic.demo import demo_rig
     from plantreg_gui.gui.calibration.frusta_view import FrustaView
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     rig = demo_rig()
     rng = np.random.default_rng(1)

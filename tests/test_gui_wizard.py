@@ -68,7 +68,7 @@ def test_demo_session_first_page_to_saved_rig(qtbot, demo_dir, tmp_path):
 
 def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
     from plantreg_gui.core.calibration import Session
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
     from plantreg_gui.core.synthetic import GROUND_Z, demo_rig
 
     truth = demo_rig()
@@ -247,7 +247,7 @@ def demo_flow(qtbot, calibration_session: Path, tmp_path: Path) -> None:
 
 # ---------------------------------------------------------------------- the real OpenCV stereo set
 def test_opencv_stereo_to_saved_rig_tallest_bar_is_engine_worst_view(qtbot, shared_data, tmp_path, monkeypatch):
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
 
     folder = tmp_path / "stereo"
     shutil.copytree(shared_data / "opencv-stereo", folder)
@@ -475,7 +475,7 @@ def test_load_demo_writes_only_the_calibration_session(qtbot, demo_dir, tmp_path
             want.pop("review", None)
             assert got == want, name
         assert sorted(p.name for p in session.iterdir()) == sorted(p.name for p in ref.iterdir())
-        from plantreg_gui.core.imageio import read_image
+        from plantreg_gui.core.io.imageio import read_image
 
         np.testing.assert_array_equal(read_image(session / "pose_03" / "ir.png"), read_image(ref / "pose_03" / "ir.png"))
     finally:

@@ -1,7 +1,7 @@
 """The wizard's GUI thread never freezes while it detects, calibrates and computes the error
 tables (issue 11: 2.4 s, 1.9 s and 8-12 s stalls before).
 
-Measured with :class:`~plantreg_gui.gui.stall_probe.StallProbe` (a 20 ms timer on the GUI
+Measured with :class:`~stall_probe.StallProbe` (a 20 ms timer on the GUI
 thread) while the wizard *resumes* the real OpenCV stereo session on page 7 -- detection,
 calibration, error tables and the pages' redraws in one go.
 
@@ -59,7 +59,7 @@ class _Control:
 
 def test_resuming_a_session_on_page_7_never_freezes_the_gui(qtbot, shared_data, tmp_path):
     from plantreg_gui.gui.calibration.wizard import CalibrationWizard
-    from plantreg_gui.gui.stall_probe import StallProbe
+    from stall_probe import StallProbe
 
     folder = tmp_path / "stereo"
     shutil.copytree(shared_data / "opencv-stereo", folder)

@@ -29,12 +29,13 @@ import pytest
 import tifffile
 
 from plantreg_gui import cli
-from plantreg_gui.core import imageio
-from plantreg_gui.core import register as register_mod
-from plantreg_gui.core.camera import Camera
+from plantreg_gui.core.io import imageio
+from plantreg_gui.core.pipeline import pipeline as pipeline_mod
+from plantreg_gui.core.registration import register as register_mod
+from plantreg_gui.core.camera.camera import Camera
 from plantreg_gui.core.errors import InputError
-from plantreg_gui.core.imageio import read_image
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.io.imageio import read_image
+from plantreg_gui.core.camera.rig import Rig
 
 ROOT = Path(__file__).resolve().parents[1]
 W, H = 40, 30
@@ -408,7 +409,7 @@ def test_register_refuses_before_any_work(tmp_path, capsys, monkeypatch, breaker
     def never(*a, **k):
         raise AssertionError("registration must not start")
 
-    monkeypatch.setattr(register_mod, "Registrar", never)
+    monkeypatch.setattr(pipeline_mod, "Registrar", never)
     out = tmp_path / "out"
     code = cli.main(["register", "--rig", str(rig), "--recording", str(rec), "--target", "ir", "--out", str(out),
                      "--quiet"])
@@ -428,7 +429,7 @@ def test_valid_oddities_are_accepted(tmp_path):
     _manifest(rec, rgb="../rgb.jpg", thermal=str(tmp_path / "therm.tif"))
     _rig_edit(rig, lambda d: d["cameras"][1].update(name="thermal cam"))
     (rec / "recording.json").write_text((rec / "recording.json").read_text().replace('"thermal"', '"thermal cam"'))
-    from plantreg_gui.core.recording import Recording
+    from plantreg_gui.core.data.recording import Recording
 
     r = Recording.load(rec, Rig.load(rig))
     assert r.images["ir"].dtype == np.float16 and r.images["ir"].shape == (H, W)
@@ -705,7 +706,7 @@ def test_forged_headers_refused_under_a_memory_limit(tmp_path):
     _png_bomb(tmp_path / "d.png")
     code = textwrap.dedent(f"""
         import resource, sys
-        from plantreg_gui.core.imageio import read_image
+        from plantreg_gui.core.io.imageio import read_image
         from plantreg_gui.core.errors import InputError
         import tifffile, spectral.io.envi, PIL.Image
         used = int(open("/proc/self/statm").read().split()[0]) * resource.getpagesize()
@@ -773,8 +774,8 @@ _DROP = textwrap.dedent("""
     import os, sys
     import numpy, cv2, tifffile, PIL.Image, PIL.PngImagePlugin, PIL.JpegImagePlugin, spectral.io.envi
     import json, tempfile, shutil, signal, threading, stat, errno, warnings, re, math, argparse
-    import plantreg_gui.cli, plantreg_gui.cli.register_cmd, plantreg_gui.core.export, plantreg_gui.core.recording
-    import plantreg_gui.core.register, plantreg_gui.core.validate, plantreg_gui.core.o3d_core, numpy.lib.format, shlex
+    import plantreg_gui.cli, plantreg_gui.cli.register_cmd, plantreg_gui.core.export.export, plantreg_gui.core.data.recording
+    import plantreg_gui.core.registration.register, plantreg_gui.core.validate, plantreg_gui.core.geometry.o3d_core, numpy.lib.format, shlex
     plantreg_gui.cli.build_parser()
     os.setgroups([]); os.setgid(65534); os.setuid(65534)
 """)
@@ -801,7 +802,7 @@ def test_unprivileged_user_permission_errors():
         os.chmod(writable, 0o777)
         code = _DROP + textwrap.dedent(f"""
             import sys
-            from plantreg_gui.core.imageio import read_image
+            from plantreg_gui.core.io.imageio import read_image
             from plantreg_gui.core.errors import InputError
             from plantreg_gui.cli import main
             for f in ("{rec}/hs.hdr",):
@@ -874,7 +875,7 @@ BAD_RECORDINGS = [_structured_npy, _complex_npy, _npy_7tib, _png_truncated, _jpe
 @pytest.mark.parametrize("breaker", BAD_RIGS, ids=[b.__name__.strip("_") for b in BAD_RIGS])
 def test_batch_refuses_a_bad_rig_before_any_work(tmp_path, capsys, monkeypatch, breaker):
     """A broken rig stops the whole batch up front: one line naming the rig, exit 1, no OUT."""
-    from plantreg_gui.core import batch as batch_mod
+    from plantreg_gui.core.pipeline import batch as batch_mod
 
     rig, rec = _write_inputs(tmp_path)
     culprit, words = breaker(rig, rec, tmp_path)

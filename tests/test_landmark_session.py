@@ -1,4 +1,4 @@
-"""The landmark page's Qt-free model (core/landmark_session.py) against synthetic truth.
+"""The landmark page's Qt-free model (models/landmarks.py) against synthetic truth.
 
 Landmarks are what a careful user clicks on the demo plant (core/synthetic/landmarks.py): the
 TRUE surface point projected by the TRUE rig. The start rig is the true one perturbed. A fitted
@@ -11,10 +11,10 @@ import math
 import numpy as np
 import pytest
 
-from plantreg_gui.core.landmark_session import LandmarkSession
-from plantreg_gui.core.landmarks import LandmarkSet
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.rigfit import RecordingLandmarks, evaluate_landmarks
+from plantreg_gui.models.landmarks import LandmarkSession
+from plantreg_gui.core.data.landmarks import LandmarkSet
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, evaluate_landmarks
 from plantreg_gui.core.synthetic import demo_rig, make_plant_scene, render_depth
 from plantreg_gui.core.synthetic.landmarks import perturb_rig, synthetic_landmarks
 
@@ -144,7 +144,7 @@ def test_save_round_trip(world, tmp_path):
     r = s.save_rig(tmp_path / "rig.json")
     d = json.loads(r.read_text())
     assert d["calibration"]["landmarks_used"] == 8
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
 
     assert np.allclose(Rig.load(r).camera(CAM).t_cam_rig, s.rig.camera(CAM).t_cam_rig)
 
@@ -160,7 +160,7 @@ def test_nudging_the_depth_camera_is_refused(world):
 def test_undo_keeps_fields_it_does_not_know(world):
     """A landmark's extra fields (written by another tool, kept by the file format) survive an undo
     (before, restoring the undo snapshot dropped everything but depth_uv, cameras and note)."""
-    from plantreg_gui.core.landmarks import Landmark
+    from plantreg_gui.core.data.landmarks import Landmark
 
     s = session_for(world)
     s.landmarks.recordings["plant"].append(Landmark([10.0, 20.0], {CAM: [30.0, 40.0]}, "tip",

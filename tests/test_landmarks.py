@@ -1,4 +1,4 @@
-"""The landmarks file (core/landmarks.py): round trip and bad files with one clear line."""
+"""The landmarks file (core/data/landmarks.py): round trip and bad files with one clear line."""
 
 import json
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from plantreg_gui.core.errors import InputError
-from plantreg_gui.core.landmarks import Landmark, LandmarkSet
+from plantreg_gui.core.data.landmarks import Landmark, LandmarkSet
 from plantreg_gui.core.synthetic import demo_rig
 
 ISSUE_EXAMPLE = {"format": "plantreg.landmarks", "version": 1,

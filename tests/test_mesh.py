@@ -9,9 +9,9 @@ import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from plantreg_gui.core.camera import Camera
-from plantreg_gui.core.mesh import backproject_depth, boundary_edges, extend_boundary, object_mesh, uncertainty_mesh
-from plantreg_gui.core.raycast import MeshScene
+from plantreg_gui.core.camera.camera import Camera
+from plantreg_gui.core.geometry.mesh import backproject_depth, boundary_edges, extend_boundary, object_mesh, uncertainty_mesh
+from plantreg_gui.core.geometry.raycast import MeshScene
 
 ROI_MIN = np.array([-0.45, -0.45, 0.30])
 ROI_MAX = np.array([0.45, 0.45, 1.17])
@@ -252,8 +252,9 @@ def test_no_skirt_at_noise_holes(cam, rays):
 def test_transport_pixels_uses_the_requested_boundary_skirt(cam, rays):
     """The same depth map meshed with and without the skirt: a pixel half-way into the boundary
     pixel's outer half is carried only with the skirt (the mesh cache must not mix them up)."""
-    from plantreg_gui.core.register import RegistrationParams, transport_pixels
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.registration.params import RegistrationParams
+    from plantreg_gui.core.registration.transport import transport_pixels
+    from plantreg_gui.core.camera.rig import Rig
 
     H, W = cam.shape
     depth = np.full((H, W), np.nan, dtype=np.float32)

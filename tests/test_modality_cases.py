@@ -7,8 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from plantreg_gui.core import display, modality
-from plantreg_gui.core.cases import AREA_COLOURS, AREA_NAMES, CASE_COLOURS, CASE_NAMES, Area, Case
+from plantreg_gui.core.display import display
+from plantreg_gui.core.camera import modality
+from plantreg_gui.core.registration.cases import AREA_COLOURS, AREA_NAMES, CASE_COLOURS, CASE_NAMES, Area, Case
 
 
 @pytest.mark.parametrize("spelling, canonical", [
@@ -35,7 +36,7 @@ def test_rig_from_wizard_with_visible_and_lwir_is_rgb_and_thermal(tmp_path):
     camera was drawn as thermal but detected with normal polarity."""
     from plantreg_gui.core.calibration.detect import detect_image
     from plantreg_gui.core.calibration.board import Board
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
 
     cams = [{"name": "c", "modality": "visible", "width": 8, "height": 6,
              "K": [[10, 0, 4], [0, 10, 3], [0, 0, 1]]},
@@ -66,12 +67,9 @@ def test_session_default_polarity_by_alias(tmp_path):
     assert s.default_inverted("a") and not s.default_inverted("b")
 
 
-def test_case_codes_keep_their_values_and_old_names():
-    from plantreg_gui.core import register
-
+def test_case_codes_keep_their_values():
     assert [int(c) for c in Case] == [0, 1, 2, 3, 4, 5, 6] and [int(a) for a in Area] == [4, 5, 6]
-    assert register.CASE_P2 == 2 and register.CASE_OUTSIDE == 6 and register.AREA_P5 == 5
-    assert register.CASE_NAMES is CASE_NAMES and CASE_NAMES[3] == "P3.1 incoming uncertain"
+    assert CASE_NAMES[3] == "P3.1 incoming uncertain"
     assert AREA_NAMES[4] == "P4 certain object"
     assert Case.P2.short == "P2" and Case.P2.colour == (0, 255, 255) and Case.P1.colour is None
     assert display.CASE_COLOURS == CASE_COLOURS and display.AREA_COLOURS == AREA_COLOURS
@@ -79,8 +77,8 @@ def test_case_codes_keep_their_values_and_old_names():
 
 
 def test_one_depth_conversion_and_back_projection():
-    from plantreg_gui.core.camera import Camera
-    from plantreg_gui.core.depth import back_project, to_metres, to_millimetres
+    from plantreg_gui.core.camera.camera import Camera
+    from plantreg_gui.core.geometry.depth import back_project, to_metres, to_millimetres
 
     raw = np.array([[0, 1000], [2500, 65535]], np.uint16)
     m = to_metres(raw, 0.001)

@@ -217,7 +217,7 @@ def test_about_rows_import_nothing_heavy():
     import cv2
     import vtkmodules
 
-    from plantreg_gui.core.o3d_core import open3d_core
+    from plantreg_gui.core.geometry.o3d_core import open3d_core
 
     open3d_core()
     import open3d

@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 import tifffile
 
-from plantreg_gui.core import register as register_mod
-from plantreg_gui.core.display import fit_pca, to_rgb8
-from plantreg_gui.core.export import write_outputs
-from plantreg_gui.core.hits import HitImage
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.register import Registrar, keep_at_hits
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.registration import register as register_mod
+from plantreg_gui.core.display.display import fit_pca, to_rgb8
+from plantreg_gui.core.export.export import write_outputs
+from plantreg_gui.core.registration.hits import HitImage
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.registration.register import Registrar, keep_at_hits
+from plantreg_gui.core.camera.rig import Rig
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -82,7 +82,7 @@ def test_programs_run_blas_in_one_thread_unless_told(program):
 
 
 def test_values_at_a_run_of_hits_is_their_values():
-    from plantreg_gui.core.hits import values_at
+    from plantreg_gui.core.registration.hits import values_at
 
     rng = np.random.default_rng(5)
     H, W, B = 30, 40, 7
@@ -99,7 +99,7 @@ def test_values_at_a_run_of_hits_is_their_values():
 
 def test_tiled_writer_with_threads_keeps_tile_order(tmp_path):
     """Many small tiles encoded by several threads, in windows: the file decodes to the image."""
-    from plantreg_gui.core.imageio import dense_tiles, write_tiff_tiled
+    from plantreg_gui.core.io.imageio import dense_tiles, write_tiff_tiled
 
     rng = np.random.default_rng(9)
     a = rng.random((333, 517, 204), dtype=np.float32)  # 16 x 16 tiles, ragged edges
@@ -115,7 +115,7 @@ def test_rays_cast_only_where_they_can_hit_give_the_same_registration(demo_dir, 
     """Target rays are computed only in grid cells whose rays can reach a mesh, and cast only where
     they can hit (raycast.pixel_rays_toward, cone_marks): every array of the registration equals
     the one computing and casting all rays, for two targets that cast (thermal, rgb)."""
-    from plantreg_gui.core import raycast
+    from plantreg_gui.core.geometry import raycast
 
     rig = Rig.load(demo_dir / "rig.json")
     rec = Recording.load(demo_dir / "recording", rig)

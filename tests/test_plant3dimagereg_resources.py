@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from plantreg_gui.core.landmarks import LandmarkSet
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.data.landmarks import LandmarkSet
+from plantreg_gui.core.camera.rig import Rig
 
 ROOT = Path(__file__).resolve().parents[1]
 RES = ROOT / "resources" / "plant3dimagereg"
@@ -55,9 +55,9 @@ def test_landmarks_file_is_valid_for_the_rig():
 
 
 def test_landmarks_agree_with_the_two_eye_readings():
-    """Every landmark comes from two readings that agree (tools/finalize.py) and lies a few pixels
+    """Every landmark comes from two readings that agree (landmark_scripts/finalize.py) and lies a few pixels
     inside the read feature (the inward step onto valid depth)."""
-    ann = json.loads((RES / "tools" / "annotations.json").read_text())
+    ann = json.loads((RES / "landmark_scripts" / "annotations.json").read_text())
     for items in ann.values():
         for it in items:
             step = np.linalg.norm(np.subtract(it["ir"], it["feature_ir"]))
@@ -66,7 +66,7 @@ def test_landmarks_agree_with_the_two_eye_readings():
 
 @needs_data
 def test_every_recording_loads_against_the_fitted_rig():
-    from plantreg_gui.core.recording import Recording
+    from plantreg_gui.core.data.recording import Recording
 
     rig = Rig.load(RES / "rig.json")
     for p in PLANTS:
@@ -76,7 +76,7 @@ def test_every_recording_loads_against_the_fitted_rig():
 
 @needs_data
 def test_landmarks_sit_on_valid_plant_depth_and_the_fitted_rig_explains_the_hyperspectral_ones():
-    from plantreg_gui.core.rigfit import evaluate_landmarks, landmark_depth, load_recording_landmarks
+    from plantreg_gui.core.rigfit.rigfit import evaluate_landmarks, landmark_depth, load_recording_landmarks
 
     rig = Rig.load(RES / "rig.json")
     recs = load_recording_landmarks(rig, LandmarkSet.load(RES / "landmarks.json", rig))
@@ -92,7 +92,7 @@ def test_landmarks_sit_on_valid_plant_depth_and_the_fitted_rig_explains_the_hype
 
 
 def test_heldout_landmarks_are_valid_and_were_kept_out_of_the_fit():
-    """landmarks_heldout.json: pairs read after rig.json was fitted (tools/build_landmarks.py writes
+    """landmarks_heldout.json: pairs read after rig.json was fitted (landmark_scripts/build_landmarks.py writes
     the annotations marked "held_out" there); rig.json's fit used landmarks.json alone."""
     rig = Rig.load(RES / "rig_nominal.json")
     held = LandmarkSet.load(RES / "landmarks_heldout.json", rig, check_recordings=True)
@@ -108,7 +108,7 @@ def test_heldout_landmarks_are_valid_and_were_kept_out_of_the_fit():
 def test_the_fitted_rig_predicts_the_heldout_thermal_landmarks():
     """An independent check of the shipped thermal pose on pairs it was not fitted to. Measured
     (README, "Fit"): 1.3-5.8 px, median 3.6 px; the bounds leave ~1.5 px for reading noise."""
-    from plantreg_gui.core.rigfit import evaluate_landmarks, load_recording_landmarks
+    from plantreg_gui.core.rigfit.rigfit import evaluate_landmarks, load_recording_landmarks
 
     rig = Rig.load(RES / "rig.json")
     recs = load_recording_landmarks(rig, LandmarkSet.load(RES / "landmarks_heldout.json", rig))

@@ -1,4 +1,4 @@
-"""core/process_job.py: a routine in the worker process keeps the Reporter contract (result,
+"""core/jobs/process_job.py: a routine in the worker process keeps the Reporter contract (result,
 user errors, progress, cancel) of a routine on a thread."""
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def _forever(progress=None):
 
 def test_result_progress_errors_and_cancel():
     from plantreg_gui.core.errors import Cancelled, InputError
-    from plantreg_gui.core.process_job import run_in_process
+    from plantreg_gui.core.jobs.process_job import run_in_process
     from plantreg_gui.core.progress import Reporter
 
     seen = []
@@ -55,10 +55,10 @@ def test_the_worker_pool_is_shut_down_before_the_interpreter_tears_down():
     from pathlib import Path
 
     code = ("import atexit, sys\n"
-            "from plantreg_gui.core import process_job\n"
+            "from plantreg_gui.core.jobs import process_job\n"
             "atexit.register(lambda: print('pool at teardown:', 'pool' in process_job._state, flush=True))\n"
             "if __name__ == '__main__':\n"
-            "    from plantreg_gui.core.process_job import run_in_process\n"
+            "    from plantreg_gui.core.jobs.process_job import run_in_process\n"
             "    import test_process_job as t\n"
             "    print('result', run_in_process(t._square, 7), flush=True)\n")
     here = Path(__file__).resolve().parent

@@ -8,7 +8,7 @@ import time
 import pytest
 
 from plantreg_gui.core.errors import Cancelled, InputError, PlantregError
-from plantreg_gui.core.procs import call_in_process
+from plantreg_gui.core.jobs.procs import call_in_process
 from plantreg_gui.core.progress import CancelToken, Reporter
 
 

@@ -9,8 +9,8 @@ import pytest
 from PIL import Image
 
 from plantreg_gui.core.errors import InputError
-from plantreg_gui.core.imageio import read_image
-from plantreg_gui.core.recording import Recording, read_images
+from plantreg_gui.core.io.imageio import read_image
+from plantreg_gui.core.data.recording import Recording, read_images
 
 
 def _png(path, a):
@@ -81,7 +81,7 @@ def test_read_images_reports_the_first_bad_file_in_list_order(tmp_path):
 
 
 def test_a_refused_header_stops_the_read_before_any_pixel_is_decoded(tmp_path, monkeypatch):
-    import plantreg_gui.core.recording as recording
+    import plantreg_gui.core.data.recording as recording
 
     arrays = _files(tmp_path, np.random.default_rng(8))
     (tmp_path / "bad.tif").write_bytes(b"II*\0garbage")

@@ -1,4 +1,4 @@
-"""Region statistics (core/region.py) against a hand-made result whose every value is known
+"""Region statistics (core/registration/region.py) against a hand-made result whose every value is known
 (tests/test_export.py: a plane seen by the ir target, thermal = 20 + 0.1 * column, cube band b =
 100 * b + row, known case counts)."""
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from plantreg_gui.core.errors import InputError
-from plantreg_gui.core.hits import HitImage
-from plantreg_gui.core.region import region_mask, region_stats, stats_csv
+from plantreg_gui.core.registration.hits import HitImage
+from plantreg_gui.core.registration.region import region_mask, region_stats, stats_csv
 
 from test_export import C0, C1, NB, R0, R1, _result
 
@@ -105,7 +105,7 @@ def _cube_result(seed=3):
 
 @pytest.mark.parametrize("chunk", [5, 64, 1 << 22])  # one band / a few pixels at a time .. all at once
 def test_chunked_cube_statistics_match_the_arrays(monkeypatch, chunk):
-    from plantreg_gui.core import region
+    from plantreg_gui.core.registration import region
 
     monkeypatch.setattr(region, "CHUNK", chunk)
     res, cube, hit, codes, mixed = _cube_result()
@@ -121,7 +121,7 @@ def test_chunked_cube_statistics_match_the_arrays(monkeypatch, chunk):
 
 
 def test_statistics_are_cancellable_between_chunks(monkeypatch):
-    from plantreg_gui.core import region
+    from plantreg_gui.core.registration import region
     from plantreg_gui.core.errors import Cancelled
     from plantreg_gui.core.progress import CancelToken, Reporter
 

@@ -6,20 +6,21 @@ pixel of the true surface point and whether that point is visible from the sourc
 restricted to points inside the rig's ROI: outside it the method by definition sees no object.
 """
 
+import cv2
 import numpy as np
 import pytest
 from scipy.ndimage import map_coordinates
 
-from plantreg_gui.core.camera import Camera
+from plantreg_gui.core.camera.camera import Camera
 from plantreg_gui.core.errors import Cancelled, InputError
 from plantreg_gui.core.progress import CancelToken, Reporter
-from plantreg_gui.core.raycast import pixel_rays_cam, project_points
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.register import (
-    AREA_P4, AREA_P5, AREA_P6, CASE_BACKGROUND, CASE_OUTSIDE, CASE_P1, CASE_P2, CASE_P31, CASE_P32, CASE_P5,
-    Registrar, RegistrationParams, register, sample_bilinear, transport_pixels,
-)
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.geometry.raycast import pixel_rays_cam
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.registration.cases import Area, Case
+from plantreg_gui.core.registration.register import Registrar, RegistrationParams, register
+from plantreg_gui.core.registration.sampling import sample_bilinear
+from plantreg_gui.core.registration.transport import transport_pixels
+from plantreg_gui.core.camera.rig import Rig
 from plantreg_gui.core.synthetic import demo_rig, ground_truth, make_plant_scene, render_depth, render_recording
 
 
@@ -59,7 +60,7 @@ def in_roi(rig, gt):
 def figures(rig, res, gt, src):
     """The issue's figures for one source camera."""
     case = res.cases[src]
-    p1 = case == CASE_P1
+    p1 = case == Case.P1
     matchable = gt.matchable[src] & in_roi(rig, gt)
     err = np.linalg.norm(res.source_uv[src] - gt.uv[src], axis=2)[p1 & matchable]
     occluded = gt.occluded(src) & in_roi(rig, gt)
@@ -68,8 +69,8 @@ def figures(rig, res, gt, src):
         "p90": float(np.percentile(err, 90)),
         "p1_coverage": (p1 & matchable).sum() / matchable.sum(),
         "p1_visible": (p1 & gt.visible[src]).sum() / p1.sum(),
-        "occluded_p2_p32": np.isin(case[occluded], [CASE_P2, CASE_P32]).mean(),
-        "occluded_not_p1": (case[occluded] != CASE_P1).mean(),
+        "occluded_p2_p32": np.isin(case[occluded], [Case.P2, Case.P32]).mean(),
+        "occluded_not_p1": (case[occluded] != Case.P1).mean(),
         "n_matchable": int(matchable.sum()),
         "n_occluded": int(occluded.sum()),
     }
@@ -123,7 +124,7 @@ def test_registered_values_are_the_source_sampled_at_the_true_position(demo, ir)
     res, gt = ir
     roi = in_roi(rig, gt)
     for src in ("thermal", "hyperspectral"):
-        sel = (res.cases[src] == CASE_P1) & gt.matchable[src] & roi
+        sel = (res.cases[src] == Case.P1) & gt.matchable[src] & roi
         uv = gt.uv[src][sel]
         img = rec.images[src].astype(np.float64)
         coords = [np.clip(uv[:, 1], 0, img.shape[0] - 1), np.clip(uv[:, 0], 0, img.shape[1] - 1)]
@@ -161,14 +162,14 @@ def test_result_layout_and_mapping_rule(demo, ir):
             continue
         case = res.cases[cam]
         assert case.dtype == np.uint8
-        mapped = hit & (case != CASE_OUTSIDE)
+        mapped = hit & (case != Case.OUTSIDE)
         first = reg if reg.ndim == 2 else reg[..., 0]
         assert np.array_equal(np.isfinite(first), mapped), cam  # occluded pixels keep values too
         # cases without an object hit are exactly background and P5
-        assert set(np.unique(case[~hit]).tolist()) <= {CASE_BACKGROUND, CASE_P5}
-        assert set(np.unique(case[hit]).tolist()) <= {CASE_P1, CASE_P2, CASE_P31, CASE_P32, CASE_OUTSIDE}
-    assert set(np.unique(res.area).tolist()) <= {AREA_P4, AREA_P5, AREA_P6}
-    assert np.all(res.area[hit] != AREA_P6)
+        assert set(np.unique(case[~hit]).tolist()) <= {Case.BACKGROUND, Case.P5}
+        assert set(np.unique(case[hit]).tolist()) <= {Case.P1, Case.P2, Case.P31, Case.P32, Case.OUTSIDE}
+    assert set(np.unique(res.area).tolist()) <= {Area.P4, Area.P5, Area.P6}
+    assert np.all(res.area[hit] != Area.P6)
 
 
 def test_background_is_true_background(demo, ir, thermal):
@@ -176,8 +177,8 @@ def test_background_is_true_background(demo, ir, thermal):
     for res, gt in (ir, thermal):
         obj = gt.object & in_roi(rig, gt)
         # silhouettes are right to about half a depth pixel: errors only along the outline
-        assert ((res.area == AREA_P6) & obj).sum() <= 0.01 * obj.sum()  # object called certain background
-        assert ((res.area == AREA_P4) & ~gt.object).sum() <= 0.01 * obj.sum()  # background called certain object
+        assert ((res.area == Area.P6) & obj).sum() <= 0.01 * obj.sum()  # object called certain background
+        assert ((res.area == Area.P4) & ~gt.object).sum() <= 0.01 * obj.sum()  # background called certain object
 
 
 # ---------------------------------------------------------------------------- engine behaviour
@@ -229,7 +230,7 @@ def test_transport_pixels_matches_ground_truth(demo, ir):
     rig, scene, rec = demo
     res, gt = ir
     depth_m = rec.depth_m(rig.depth_scale)
-    sel = np.argwhere((res.cases["thermal"] == CASE_P1) & gt.matchable["thermal"] & in_roi(rig, gt))
+    sel = np.argwhere((res.cases["thermal"] == Case.P1) & gt.matchable["thermal"] & in_roi(rig, gt))
     sel = sel[np.random.default_rng(3).choice(len(sel), 400, replace=False)]
     uv = sel[:, ::-1].astype(float)  # integer pixel centres: rays exactly through mesh vertices
     out = transport_pixels(rig, depth_m, "ir", uv, "thermal")
@@ -247,7 +248,7 @@ def test_transport_pixels_matches_ground_truth(demo, ir):
     # the other way round, and nothing for a pixel that sees no object
     back = transport_pixels(rig, depth_m, "thermal", out[:50], "ir")
     assert np.median(np.linalg.norm(back - uv[:50], axis=1)) <= 0.1
-    bg = np.argwhere(res.area == AREA_P6)[0][::-1].astype(float)
+    bg = np.argwhere(res.area == Area.P6)[0][::-1].astype(float)
     assert np.isnan(transport_pixels(rig, depth_m, "ir", bg[None], "thermal")).all()
 
 
@@ -267,10 +268,11 @@ def test_fast_camera_geometry_equals_opencv(dist):
     cam = _camera(320, 240, dist)
     rng = np.random.default_rng(2)
     X = rng.uniform([-0.4, -0.3, 0.5], [0.4, 0.3, 1.2], (5000, 3))
-    uv, z = project_points(cam, X)
-    uv0, z0 = cam.project(X)
+    uv, z = cam.project(X)  # vectorised numpy
+    uv0 = cv2.projectPoints(X, cam.rvec, cam.t_cam_rig, cam.K, cam.dist)[0].reshape(-1, 2)
+    z0 = cam.to_cam(X)[:, 2]
     assert np.max(np.abs(uv - uv0)) < 1e-8 and np.allclose(z, z0)
-    assert np.isnan(project_points(cam, np.array([[0, 0, -1.0]]) - cam.t_cam_rig)[0]).all()
+    assert np.isnan(cam.project(np.array([[0, 0, -1.0]]) - cam.t_cam_rig)[0]).all()
     big = _camera(1600, 1200, dist)
     d = pixel_rays_cam(big)
     idx = rng.integers(0, len(d), 3000)
@@ -296,7 +298,7 @@ def test_sample_bilinear(shape, dtype):
 
 @pytest.mark.parametrize("shape", [(100, 3), (368640, 60)])  # small: numpy; 88 MB: plain mapping
 def test_nan_array(shape):
-    from plantreg_gui.core.register import nan_array
+    from plantreg_gui.core.registration.hits import nan_array
 
     a = nan_array(shape)
     assert a.shape == shape and a.dtype == np.float32 and np.isnan(a).all() and a.flags.writeable

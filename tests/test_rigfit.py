@@ -1,4 +1,4 @@
-"""Landmark fit (core/rigfit.py) against the truth of the synthetic demo rig.
+"""Landmark fit (core/rigfit/rigfit.py) against the truth of the synthetic demo rig.
 
 The landmarks are what a careful user clicks: depth-camera pixels spread over the plant, the TRUE
 surface point projected into every source by the TRUE rig, plus Gaussian click noise. The fitted
@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from plantreg_gui.core.errors import InputError
-from plantreg_gui.core.landmarks import Landmark
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.register import CASE_P1, Registrar
-from plantreg_gui.core.rigfit import (
+from plantreg_gui.core.data.landmarks import Landmark
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.registration.register import Registrar
+from plantreg_gui.core.registration.cases import Case
+from plantreg_gui.core.rigfit.rigfit import (
     Priors, RecordingLandmarks, fit_rig, format_report, landmark_depth, nominal_camera, parse_free,
 )
 from plantreg_gui.core.synthetic import demo_rig, ground_truth, make_plant_scene, render_depth
@@ -63,7 +64,7 @@ def unseen_errors(true_rig, fitted, seed):
         roi = np.all((P >= true_rig.roi_min) & (P <= true_rig.roi_max), axis=2)
     out = {}
     for src in SOURCES:
-        sel = (res.cases[src] == CASE_P1) & gt.matchable[src] & roi
+        sel = (res.cases[src] == Case.P1) & gt.matchable[src] & roi
         assert sel.sum() > 10000, src
         out[src] = np.linalg.norm(res.source_uv[src] - gt.uv[src], axis=2)[sel]
     return out
@@ -265,15 +266,16 @@ def test_free_items_are_checked(true_rig):
 
 
 # ---------------------------------------------------------------------------- speed, nominal cameras
-def test_fit_of_100_landmarks_takes_under_a_second(true_rig):
-    """~100 landmarks (2 x 50, three cameras each), focal free, without leave-one-out.
-    Measured ~0.3-0.5 s on 2 shared cores; asserted with a 3x tolerance for a loaded machine."""
+def test_fit_of_100_landmarks_recovers_the_rig(true_rig):
+    """~100 landmarks (2 x 50, three cameras each), focal free, without leave-one-out: the fit
+    lands on the true poses (its speed is a benchmark's business: benchmarks/bench_rigfit_seeds.py)."""
     rng = np.random.default_rng(16)
     recs = landmark_recordings(true_rig, (31, 32), rng, n=50)
     start = perturb_rig(true_rig, rng)
     res = fit_rig(start, recs, free=FREE_FOCAL, loo=False)
-    print("fit time", res.report["time_s"])
-    assert res.report["time_s"] < 3.0
+    for cam in ("rgb", "thermal", "hyperspectral"):
+        fitted, true = res.rig.camera(cam), true_rig.camera(cam)
+        assert np.linalg.norm(fitted.center_rig - true.center_rig) < 0.01, cam  # metres
 
 
 def test_nominal_camera_from_a_datasheet():
@@ -292,7 +294,7 @@ def test_nominal_camera_from_a_datasheet():
 def test_leave_one_out_skips_cameras_too_thin_in_a_fold_and_evaluate(true_rig):
     """Thermal seen in one recording only: its fold is 'unavailable', the other cameras still get
     leave-one-out residuals; evaluate_landmarks gives the residuals of a rig without fitting."""
-    from plantreg_gui.core.rigfit import evaluate_landmarks
+    from plantreg_gui.core.rigfit.rigfit import evaluate_landmarks
 
     rng = np.random.default_rng(17)
     recs = landmark_recordings(true_rig, (31, 32), rng)

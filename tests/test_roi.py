@@ -1,4 +1,4 @@
-"""The ROI against a plant's depth map (core/roi.py) and registration's warning when the ROI
+"""The ROI against a plant's depth map (core/geometry/roi.py) and registration's warning when the ROI
 cuts off most of the plant (issue 11, defect 1).
 
 Ground truth: the synthetic demo scenes stand on a ground plane at z = GROUND_Z (1.20 m) in the
@@ -30,9 +30,9 @@ def other_seed(tmp_path_factory):
 
 
 def _points(folder):
-    from plantreg_gui.core.recording import Recording
-    from plantreg_gui.core.register import pixel_rays_cam
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.data.recording import Recording
+    from plantreg_gui.core.registration.register import pixel_rays_cam
+    from plantreg_gui.core.camera.rig import Rig
 
     rig = Rig.load(folder / "rig.json")
     rec = Recording.load(folder / "recording", rig)
@@ -42,7 +42,7 @@ def _points(folder):
 
 @pytest.mark.parametrize("which", ["demo", "seed3"])
 def test_fit_roi_from_a_plant_depth_map_keeps_the_plant_and_drops_the_ground(which, demo_dir, other_seed):
-    from plantreg_gui.core.roi import cut_fraction, cut_warning, fit_roi
+    from plantreg_gui.core.geometry.roi import cut_fraction, cut_warning, fit_roi
     from plantreg_gui.core.synthetic import GROUND_Z
 
     rig, _rec, X = _points(demo_dir if which == "demo" else other_seed)
@@ -62,10 +62,10 @@ PLANTS = ["01grapevine", "02leopard_lily", "03areca_palm", "04philodendron", "05
 def test_the_real_plants_roi_warns_only_when_it_cuts_the_plant(shared_data):
     from pathlib import Path
 
-    from plantreg_gui.core.depth import to_metres
-    from plantreg_gui.core.register import pixel_rays_cam
-    from plantreg_gui.core.rig import Rig
-    from plantreg_gui.core.roi import cut_warning
+    from plantreg_gui.core.geometry.depth import to_metres
+    from plantreg_gui.core.registration.register import pixel_rays_cam
+    from plantreg_gui.core.camera.rig import Rig
+    from plantreg_gui.core.geometry.roi import cut_warning
 
     rig = Rig.load(Path(__file__).resolve().parents[1] / "resources" / "plant3dimagereg" / "rig.json")
     cam = rig.depth()
@@ -87,8 +87,8 @@ def test_the_real_plants_roi_warns_only_when_it_cuts_the_plant(shared_data):
 
 
 def test_registration_warns_when_the_roi_cuts_off_most_of_the_plant(demo_dir, tmp_path):
-    from plantreg_gui.core.export import build_summary
-    from plantreg_gui.core.register import Registrar, RegistrationParams
+    from plantreg_gui.core.export.export import build_summary
+    from plantreg_gui.core.registration.register import Registrar, RegistrationParams
 
     rig, rec, _X = _points(demo_dir)
     ok = Registrar(rig, rec)
@@ -104,7 +104,7 @@ def test_cli_register_prints_the_roi_warning(demo_dir, tmp_path, capsys):
     import json
 
     from plantreg_gui.cli import main
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
 
     rig = Rig.load(demo_dir / "rig.json")
     rig.roi_min, rig.roi_max = BOARD_ROI

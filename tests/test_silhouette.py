@@ -1,4 +1,4 @@
-"""Silhouette (outline) pose fit against synthetic truth (core/silhouette.py).
+"""Silhouette (outline) pose fit against synthetic truth (core/rigfit/silhouette.py).
 
 The demo rig renders two plants; the start rig is the truth with every source camera rotated by
 2 degrees and moved by 2 cm (random axes); the fit sees only the depth map and the source images
@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plantreg_gui.core import silhouette as S
+from plantreg_gui.core.rigfit import silhouette as S
 from plantreg_gui.core.errors import InputError
 from plantreg_gui.core.errors import Cancelled
 from plantreg_gui.core.progress import CancelToken, Reporter
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.camera.rig import Rig
 from plantreg_gui.core.synthetic import demo_rig, make_plant_scene
 from plantreg_gui.core.synthetic.landmarks import perturb_rig
 from plantreg_gui.core.synthetic.render import render_recording
@@ -76,7 +76,7 @@ def test_signed_distance_zero_between_plant_and_background():
 def test_cli_fit_rig_silhouette_without_landmarks(setup, tmp_path, capsys):
     """``plantreg fit-rig --silhouette`` with a landmarks file without points: the images alone."""
     from plantreg_gui import cli
-    from plantreg_gui.core.landmarks import LandmarkSet
+    from plantreg_gui.core.data.landmarks import LandmarkSet
 
     rig, recs = setup
     ls = LandmarkSet(base=tmp_path)

@@ -11,8 +11,8 @@ import pytest
 from plantreg_gui.cli import main as cli_main
 from plantreg_gui.core.errors import Cancelled, InputError
 from plantreg_gui.core.progress import CancelToken, Reporter
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.rig import Rig
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.camera.rig import Rig
 from plantreg_gui.core.synthetic import (
     MAT_GROUND, MAT_LEAF0, GroundTruth, demo_rig, ground_truth, make_plant_scene, render_depth,
     render_recording, write_demo,

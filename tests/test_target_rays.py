@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plantreg_gui.core import raycast
-from plantreg_gui.core.camera import Camera
-from plantreg_gui.core.register import RegistrationParams, build_meshes
+from plantreg_gui.core.geometry import raycast
+from plantreg_gui.core.camera.camera import Camera
+from plantreg_gui.core.registration.register import RegistrationParams, build_meshes
 from plantreg_gui.core.synthetic.demo import AIM_POINT, demo_rig
 from plantreg_gui.core.synthetic.render import render_depth
 from plantreg_gui.core.synthetic.scene import make_plant_scene
@@ -155,7 +155,7 @@ def test_sample_bilinear_band_sequential_cube(dtype):
     into given rows of ``out``: equal to SciPy's bilinear interpolation of each band."""
     from scipy.ndimage import map_coordinates
 
-    from plantreg_gui.core.register import sample_bilinear
+    from plantreg_gui.core.registration.sampling import sample_bilinear
 
     rng = np.random.default_rng(71)
     C, h, w = 11, 60, 90

@@ -13,9 +13,10 @@ import json
 import numpy as np
 import pytest
 
-from plantreg_gui.core.depthfilter import clean_depth, denoise_depth, fill_holes, flying_pixels, snap_flying
-from plantreg_gui.core.recording import Recording
-from plantreg_gui.core.register import CASE_P1, CASE_P2, CASE_P32, RegistrationParams, register
+from plantreg_gui.core.geometry.depthfilter import clean_depth, denoise_depth, fill_holes, flying_pixels, snap_flying
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.registration.register import RegistrationParams, register
+from plantreg_gui.core.registration.cases import Case
 from plantreg_gui.core.synthetic import (
     MAT_LEAF0, demo_rig, ground_truth, make_plant_scene, render_depth, render_recording,
 )
@@ -172,7 +173,7 @@ def realistic_ir(realistic):
 
 def test_the_realistic_depth_is_the_demos(realistic):
     """The figures' depth is exactly what ``render_recording(..., tof=True)`` (``plantreg demo``) renders."""
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
 
     rig, scene, rec, _gt = realistic
     small = Rig([rig.camera("ir")], rig.depth_camera, rig.depth_scale, rig.roi_min, rig.roi_max)
@@ -224,7 +225,7 @@ def test_realistic_scene_meets_the_issue_figures(seeded):
         match = gt.matchable[src] & _in_roi(rig, gt)
         obs = observable[src] & match
         bound = obs.sum() / match.sum()
-        cov_obs = ((res.cases[src] == CASE_P1) & obs).sum() / obs.sum()
+        cov_obs = ((res.cases[src] == Case.P1) & obs).sum() / obs.sum()
         msg = f"seed {seed} {src}: {f} (clean depth, same noise: {r}; observable {bound:.4f}, P1 of them {cov_obs:.4f})"
         assert f["n_occluded"] > 1000, msg
         assert f["median"] <= 0.2 and f["p90"] <= 0.6, msg
@@ -250,7 +251,7 @@ def test_p1_covers_the_views_the_depth_camera_observes(seed):
         f = _figures(rig, res, gt, src)
         match = gt.matchable[src] & _in_roi(rig, gt)
         obs = observable[src] & match
-        cov_obs = ((res.cases[src] == CASE_P1) & obs).sum() / obs.sum()
+        cov_obs = ((res.cases[src] == Case.P1) & obs).sum() / obs.sum()
         msg = f"seed {seed} {src}: {f}; observable {obs.sum() / match.sum():.4f}, P1 of them {cov_obs:.4f}"
         assert obs.sum() / match.sum() < 0.95, msg  # the scene is one where 95 % cannot be reached
         assert cov_obs >= 0.985, msg  # measured 0.9918-0.9952 (seed 5), 0.9872-0.9879 (seed 11)
@@ -288,9 +289,9 @@ def test_mean_leaf_temperature_without_mixed_pixels(seeded):
     T = _true_temperature_in_ir(rig, scene)
     leaf = gt.material >= MAT_LEAF0  # a perfect leaf segmentation of the target
     reg = res.registered["thermal"]
-    p1 = (res.cases["thermal"] == CASE_P1) & leaf
+    p1 = (res.cases["thermal"] == Case.P1) & leaf
     mixed = res.mixed["thermal"]
-    assert mixed.dtype == bool and mixed.shape == reg.shape and not (mixed & (res.cases["thermal"] != CASE_P1)).any()
+    assert mixed.dtype == bool and mixed.shape == reg.shape and not (mixed & (res.cases["thermal"] != Case.P1)).any()
     sel = p1 & ~mixed
     assert sel.sum() >= 0.8 * p1.sum()
     assert abs(np.mean(reg[sel]) - np.mean(T[sel])) <= 0.05, (seed, np.mean(reg[sel]) - np.mean(T[sel]))
@@ -301,7 +302,7 @@ def test_mean_leaf_temperature_without_mixed_pixels(seeded):
 
 
 def test_mixed_flag_radius_follows_the_camera_blur(realistic):
-    from plantreg_gui.core.mixed import mixed_radius
+    from plantreg_gui.core.registration.mixed import mixed_radius
 
     rig = realistic[0]
     assert mixed_radius(rig.camera("thermal"), 1.0) == pytest.approx(3.0)
@@ -311,7 +312,7 @@ def test_mixed_flag_radius_follows_the_camera_blur(realistic):
 def test_mixed_flag_radius_includes_the_calibration_uncertainty():
     import dataclasses
 
-    from plantreg_gui.core.mixed import calibration_residual_px, mixed_radius
+    from plantreg_gui.core.registration.mixed import calibration_residual_px, mixed_radius
 
     rig = demo_rig(thermal_blur_px=1.0)
     th = rig.camera("thermal")
@@ -331,7 +332,7 @@ def test_mixed_flag_covers_a_known_calibration_error(realistic):
     uncertainty (``registration_px`` 3) keeps the soil-mixed rims out of the unflagged leaf mean."""
     import dataclasses
 
-    from plantreg_gui.core.rig import Rig
+    from plantreg_gui.core.camera.rig import Rig
 
     rig, scene, rec, gt = realistic  # the thermal image rendered with the true pose
     T = _true_temperature_in_ir(rig, scene)
@@ -347,7 +348,7 @@ def test_mixed_flag_covers_a_known_calibration_error(realistic):
                       rig.roi_min, rig.roi_max)
         res = register(rig_off, rec, "ir")
         assert res.stats["mixed_radius_px"]["thermal"] == pytest.approx(3.0 + reg_px)
-        sel = (res.cases["thermal"] == CASE_P1) & leaf & ~res.mixed["thermal"]
+        sel = (res.cases["thermal"] == Case.P1) & leaf & ~res.mixed["thermal"]
         err[reg_px] = float(np.mean(res.registered["thermal"][sel]) - np.mean(T[sel]))
     assert abs(err[3.0]) <= 0.01 and abs(err[3.0]) <= 0.5 * abs(err[0.0]), err  # measured +0.003 / +0.015
 
@@ -367,7 +368,7 @@ def test_noise_free_registration_is_unchanged_or_better(realistic):
         assert a["p1_visible"] >= b["p1_visible"] - 0.0005, (src, a, b)
         assert a["p1_coverage"] >= b["p1_coverage"] - 0.003, (src, a, b)
         assert a["occluded_p2_p32"] >= b["occluded_p2_p32"] - 0.015, (src, a, b)
-    assert np.isin(on.cases["thermal"], [CASE_P1, CASE_P2, CASE_P32]).any()
+    assert np.isin(on.cases["thermal"], [Case.P1, Case.P2, Case.P32]).any()
 
 
 # ---------------------------------------------------------------------------- CLI and outputs
@@ -386,7 +387,7 @@ def _run(argv):
 def test_register_writes_edge_masks_flying_mask_and_counts(demo_dir, tmp_path):
     import plyfile
 
-    from plantreg_gui.core.imageio import read_image
+    from plantreg_gui.core.io.imageio import read_image
 
     out = tmp_path / "out"
     code, so, se = _run(["register", "--rig", demo_dir / "rig.json", "--recording", demo_dir / "recording",
@@ -407,14 +408,14 @@ def test_register_writes_edge_masks_flying_mask_and_counts(demo_dir, tmp_path):
         edge = read_image(out / f"cases/{cam}_edge.png")
         case = read_image(out / f"cases/{cam}.png")
         assert edge.shape == case.shape and set(np.unique(edge)) <= {0, 255}
-        assert np.all(case[edge == 255] == CASE_P1)  # today's case codes unchanged; the flag is extra
+        assert np.all(case[edge == 255] == Case.P1)  # today's case codes unchanged; the flag is extra
         assert s["tof"]["mixed"][cam]["pixels"] == int((edge == 255).sum()) > 0
         r, c = np.asarray(v["row"]), np.asarray(v["col"])
         assert np.array_equal(np.asarray(v[f"{cam}_mixed"]) == 1, edge[r, c] == 255)
 
 
 def test_register_tof_switches_and_drop_mixed(demo_dir, tmp_path):
-    from plantreg_gui.core.imageio import read_image
+    from plantreg_gui.core.io.imageio import read_image
 
     out = tmp_path / "out"
     code, so, se = _run(["register", "--rig", demo_dir / "rig.json", "--recording", demo_dir / "recording",
@@ -485,6 +486,6 @@ def test_depth_camera_as_a_source_sees_its_own_surface(seed):
         res = register(rig, rec, target)
         gt = ground_truth(rig, scene, target)
         cases = res.cases[rig.depth_camera]
-        p1 = (cases == CASE_P1).sum()
-        wrong = ((cases == CASE_P32) & gt.visible[rig.depth_camera]).sum()
+        p1 = (cases == Case.P1).sum()
+        wrong = ((cases == Case.P32) & gt.visible[rig.depth_camera]).sum()
         assert wrong <= max(5, 1e-4 * p1), (target, int(wrong), int(p1))

@@ -182,8 +182,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def entry() -> None:
     """The ``plantreg`` program (console script, ``python -m plantreg_gui``): :func:`main`, then
-    the exit without the interpreter's teardown of every module and object -- 0.05-0.13 s after
-    a paper-sized ``register`` had finished (measured on the 2-core machine), for nothing: the
+    the exit without the interpreter's teardown of every module and object -- a noticeable wait
+    after a ``register`` has finished, for nothing: the
     output files are complete and closed by then. The exit handlers still run (``atexit``:
     temporary folders, logging, process pools, a Dask client) and the standard streams are
     flushed; with a non-daemon thread still running, or if a flush fails (a closed pipe), the

@@ -1,14 +1,14 @@
 """``plantreg batch``: register many recordings of one rig, locally or on a Dask cluster.
 
     plantreg batch --rig RIG --target NAME --out OUT [--workers N] [--scheduler ADDRESS]
-                   [--overwrite] [--outputs PARTS] [--edge-angle DEG] [--quiet]
+                   [--overwrite] [--outputs PARTS] [--drop-mixed] [--edge-angle DEG] [--quiet]
                    RECORDING [RECORDING ...]
 
 A RECORDING is a recording folder, or a text/CSV file listing one per line. Each goes to
 ``OUT/<recording folder name>/`` in ``plantreg register``'s layout; ``OUT/batch.csv`` has one
 row per recording (status done / skipped / failed, the error, case shares, timings, files).
 A re-run skips recordings whose output is complete and made from the same inputs and
-parameters. Exit code 1 if any recording failed. Engine: :mod:`plantreg_gui.core.batch`.
+parameters. Exit code 1 if any recording failed. Engine: :mod:`plantreg_gui.core.pipeline.batch`.
 """
 
 from __future__ import annotations
@@ -84,13 +84,13 @@ class _Progress:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..core import batch
-    from ..core.export import check_output_spares_inputs, parse_outputs
-    from .register_cmd import load_rig_for_target, registration_params
+    from ..core.pipeline import batch
+    from ..core.export.export import check_output_spares_inputs
+    from .register_cmd import load_rig_for_target, output_options, registration_params
 
     rig_path = args.rig.absolute()
     load_rig_for_target(rig_path, args.target)  # refuses a bad rig before any work
-    what = parse_outputs(args.outputs)
+    options = output_options(args)
     params = registration_params(args)
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be at least 1, got {args.workers}")
@@ -101,8 +101,8 @@ def run(args: argparse.Namespace) -> int:
     check_output_spares_inputs(out, [rig_path] + [Path(j.recording) for j in jobs])
     out.mkdir(parents=True, exist_ok=True)
     settings = batch.BatchSettings(rig=str(rig_path), target=args.target, out=str(out), params=params.to_dict(),
-                                   outputs=what, overwrite=bool(args.overwrite),
-                                   tiff_codec=args.tiff_codec)
+                                   outputs=options.parts, overwrite=bool(args.overwrite),
+                                   tiff_codec=options.tiff_codec, drop_mixed=options.drop_mixed)
     workers = args.workers or os.cpu_count() or 1
     rows_iter = batch.run(settings, jobs, workers, args.scheduler)
     engine = f"Dask scheduler {args.scheduler}" if args.scheduler else f"up to {workers} local worker process(es)"

@@ -38,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..core.synthetic import write_demo
 
-    from ..core.imageio import check_output_location
+    from ..core.io.imageio import check_output_location
 
     d = args.dir
     if os.path.lexists(d) and not d.is_dir():  # --overwrite replaces folders, never a file

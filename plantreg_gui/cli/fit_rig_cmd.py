@@ -38,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="then refine the rig automatically from the images (see docs/fit-rig.md)")
     p.add_argument("--silhouette", action="store_true",
                    help="then fit every camera's pose to the plant outline in all recordings, with the landmarks "
-                        "as a term (core/silhouette.py; see docs/fit-rig.md)")
+                        "as a term (core/rigfit/silhouette.py; see docs/fit-rig.md)")
     p.add_argument("--recording", action="append", type=Path, default=[], metavar="DIR",
                    help="more recordings for --refine / --silhouette (repeatable)")
     p.add_argument("--worst", type=int, default=10, metavar="N", help="worst landmarks to list (default 10)")
@@ -50,9 +50,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from .. import cli
-    from ..core.landmarks import LandmarkSet
-    from ..core.rig import Rig
-    from ..core.rigfit import fit_rig_from_file, format_report, parse_free
+    from ..core.data.landmarks import LandmarkSet
+    from ..core.camera.rig import Rig
+    from ..core.rigfit.rigfit import fit_rig_from_file, format_report, parse_free
 
     out: Path = args.out
     if out.exists() and not args.overwrite:
@@ -85,8 +85,8 @@ def run(args: argparse.Namespace) -> int:
     if args.refine or args.silhouette:
         recordings, by_folder = _recordings(args, landmarks, fitted)  # read once for both
     if args.refine:
-        # the refinement is its own module (core/refine.py); imported only when asked for
-        from ..core.refine import refine_rig
+        # the refinement is its own module (core/rigfit/refine.py); imported only when asked for
+        from ..core.rigfit.refine import refine_rig
         from ..core.progress import Reporter
 
         rr = refine_rig(fitted, recordings, free=free, landmarks=by_folder,
@@ -125,7 +125,7 @@ def _recordings(args: argparse.Namespace, landmarks, rig) -> tuple[list, dict]:
     """The landmark file's recordings and any --recording DIR, read against ``rig``; the
     landmarks keyed by absolute folder (they match the recordings whatever the landmarks file's
     relative paths)."""
-    from ..core.recording import Recording
+    from ..core.data.recording import Recording
 
     folders = [landmarks.folder(k).resolve() for k in landmarks.recordings]
     folders += [f.resolve() for f in args.recording if f.resolve() not in folders]
@@ -138,7 +138,7 @@ def _silhouette(args: argparse.Namespace, fitted, recordings: list, by_folder: d
     """--silhouette: outline fit over the recordings (see :func:`_recordings`)."""
     from .. import cli
     from ..core.progress import Reporter
-    from ..core.silhouette import fit_rig_recordings
+    from ..core.rigfit.silhouette import fit_rig_recordings
 
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
     rig, srep = fit_rig_recordings(fitted, recordings, by_folder, progress=progress)

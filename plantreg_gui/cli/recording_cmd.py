@@ -38,8 +38,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run_create(args: argparse.Namespace) -> int:
-    from ..core.imageio import atomic_write_text, read_image
-    from ..core.recording import MANIFEST
+    from ..core.io.imageio import atomic_write_text, read_image
+    from ..core.data.recording import MANIFEST
 
     folder: Path = args.dir
     manifest = folder / MANIFEST

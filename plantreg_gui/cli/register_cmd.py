@@ -5,7 +5,7 @@
                       [--no-flying-filter | --remove-flying] [--flying-jump REL]
                       [--no-fill-holes] [--no-denoise] [--denoise-size N] [--mixed-radius PX] [--drop-mixed]
 
-Writes the output folder described in ``docs/outputs.md`` (see :mod:`plantreg_gui.core.export`)
+Writes the output folder described in ``docs/outputs.md`` (see :mod:`plantreg_gui.core.export.export`)
 and prints, per source camera, the share of target pixels in each projection case.
 Progress goes to stderr (``--quiet`` silences it); the summary goes to stdout.
 """
@@ -38,9 +38,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--target", required=True, metavar="NAME", help="name of the target camera")
     p.add_argument("--out", required=True, type=nonempty_path, metavar="OUT", help="output folder (must not exist or be empty)")
     add_registration_options(p)
-    tof = p.add_argument_group("mixed pixels in the outputs")
-    tof.add_argument("--drop-mixed", action="store_true",
-                     help="write NaN instead of the registered value where a pixel is flagged mixed")
     add_output_options(p)
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -50,13 +47,25 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def add_output_options(p: argparse.ArgumentParser) -> None:
     """The output options ``plantreg register`` and ``plantreg batch`` share."""
-    # the parts are core.export.OUTPUT_PARTS; not listed here: importing it would slow every --help by 0.3 s
+    # the parts are core.export.export.OUTPUT_PARTS; not listed here: importing it would slow every --help
     p.add_argument("--outputs", default=None, metavar="PARTS",
                    help="comma-separated parts of the output to write, e.g. registered,cases,ply (default: "
                    "all; an unknown name lists every part)")
     p.add_argument("--tiff-codec", default="deflate-fp", choices=("deflate-fp", "deflate", "zstd"),
                    help="lossless compression of the registered TIFFs (default deflate-fp: deflate with the "
                    "floating-point predictor; zstd is faster but not read by ImageJ/Fiji)")
+    mixed = p.add_argument_group("mixed pixels in the outputs")
+    mixed.add_argument("--drop-mixed", action="store_true",
+                       help="write NaN instead of the registered value where a pixel is flagged mixed")
+
+
+def output_options(args: argparse.Namespace):
+    """:class:`~plantreg_gui.core.pipeline.pipeline.OutputOptions` from :func:`add_output_options`'s options."""
+    from ..core.export.export import parse_outputs
+    from ..core.pipeline.pipeline import OutputOptions
+
+    return OutputOptions(parts=parse_outputs(args.outputs), tiff_codec=args.tiff_codec,
+                         drop_mixed=bool(args.drop_mixed))
 
 
 def add_registration_options(p: argparse.ArgumentParser) -> None:
@@ -87,7 +96,7 @@ def add_registration_options(p: argparse.ArgumentParser) -> None:
 
 def load_rig_for_target(rig_path: Path, target: str):
     """The rig at ``rig_path``, checked to have a depth camera and a camera ``target``."""
-    from ..core.rig import Rig
+    from ..core.camera.rig import Rig
 
     rig = Rig.load(rig_path)
     # the rig's own errors do not know its file name: add it
@@ -100,61 +109,51 @@ def load_rig_for_target(rig_path: Path, target: str):
     return rig
 
 
+#: Options that set a registration parameter: option attribute -> (parameter, type).
+_VALUE_OPTIONS = {"edge_angle": ("edge_angle_deg", float), "flying_jump": ("flying_jump_rel", float),
+                  "denoise_size": ("denoise_size", int), "mixed_radius": ("mixed_radius_px", float)}
+#: Switches that turn a registration parameter off: option attribute -> parameter.
+_OFF_SWITCHES = {"no_flying_filter": "flying_filter", "remove_flying": "flying_repair",
+                 "no_fill_holes": "fill_holes", "no_denoise": "denoise"}
+#: The command-line option of each registration parameter (named in range errors).
+OPTION_NAMES = {field: "--" + opt.replace("_", "-") for opt, (field, _t) in _VALUE_OPTIONS.items()}
+
+
 def registration_params(args: argparse.Namespace):
-    """:class:`RegistrationParams` from the options of :func:`add_registration_options`."""
-    from ..core.register import RegistrationParams
+    """:class:`RegistrationParams` from the options of :func:`add_registration_options`, checked
+    against the parameters' one table of ranges (``RegistrationParams.validate``)."""
+    from ..core.registration.params import RegistrationParams
 
     params = RegistrationParams()
-    if args.edge_angle is not None:
-        if not 0.0 < args.edge_angle < 90.0:
-            raise InputError(f"--edge-angle must be between 0 and 90 degrees, got {args.edge_angle:g}")
-        params.edge_angle_deg = float(args.edge_angle)
-    _tof_params(args, params)
-    return params
+    for opt, (field, kind) in _VALUE_OPTIONS.items():
+        if getattr(args, opt) is not None:
+            setattr(params, field, kind(getattr(args, opt)))
+    for opt, field in _OFF_SWITCHES.items():
+        if getattr(args, opt):
+            setattr(params, field, False)
+    return params.validate(OPTION_NAMES)
 
 
 def run(args: argparse.Namespace) -> int:
     from .. import cli
-    from contextlib import nullcontext
-
-    from ..core.export import EarlyTiffs, check_output_spares_inputs, parse_outputs, write_outputs
-    from ..core.imageio import check_output_location
-    from ..core.recording import Recording
-    from ..core.register import AREA_P4, AREA_P5, AREA_P6, Registrar
+    from ..core.export.export import check_output_spares_inputs
+    from ..core.io.imageio import check_output_location
+    from ..core.pipeline.pipeline import register_recording
+    from ..core.registration.cases import Area, Case
 
     rig_path: Path = args.rig
     out: Path = args.out
     rig = load_rig_for_target(rig_path, args.target)
-    what = parse_outputs(args.outputs)
+    options = output_options(args)
     params = registration_params(args)
     # fail before the long work, not after it: the output location (free or --overwrite, not an
     # input, writable), then the recording (names, then every image's header and size)
     check_output_spares_inputs(out, [rig_path, args.recording])
     check_output_location(out, "output", folder=True, overwrite=args.overwrite, inputs=[rig_path, args.recording])
-    from ..core.o3d_core import load_in_background
-
-    # Open3D's extension loads in a thread (~0.4 s, GIL held) while the images decode (GIL
-    # released), and while the first, numpy-only steps of the registration run (its first
-    # open3d_core() call waits for the load); joined always, so no error exits mid-load
-    loading: list = []
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
-    # the registered TIFFs are encoded as soon as each image is made, on the core the
-    # registration leaves idle (export.EarlyTiffs); not with --drop-mixed, which changes them after
-    early = EarlyTiffs(out, args.tiff_codec) if "registered" in what and not args.drop_mixed else None
-    with early or nullcontext():
-        try:
-            recording = Recording.load(args.recording, rig, while_decoding=lambda: loading.append(load_in_background()))
-            result = Registrar(rig, recording, params).register(args.target, progress.sub(0.0, 0.85),
-                                                                on_image=early)
-        finally:
-            for t in loading:
-                t.join()
-        if args.drop_mixed:
-            drop_mixed(result)
-        write_outputs(result, rig, recording, out, overwrite=args.overwrite, progress=progress.sub(0.85, 1.0),
-                      what=what, tiff_codec=args.tiff_codec, early=early,
-                      inputs={"rig": rig_path.resolve(), "recording": Path(args.recording).resolve(),
-                              "command": _command_line(args)})
+    result = register_recording(rig, args.recording, args.target, out, params, options, overwrite=args.overwrite,
+                                inputs={"rig": rig_path.resolve(), "recording": Path(args.recording).resolve(),
+                                        "command": _command_line(args)}, progress=progress).result
 
     H, W = result.shape
     n = H * W
@@ -163,12 +162,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"warning: {w}", file=sys.stderr)
     for cam, counts in result.case_counts().items():
         # P1, P2, P3.1, P3.2, P5, P6 background, outside the source: % of all target pixels
-        parts = [f"{_SHORT[c]} {100.0 * counts.get(c, 0) / n:5.1f}%" for c in (1, 2, 3, 4, 5, 0, 6)]
+        parts = [f"{c.short} {100.0 * counts.get(int(c), 0) / n:5.1f}%" for c in
+                 (Case.P1, Case.P2, Case.P31, Case.P32, Case.P5, Case.BACKGROUND, Case.OUTSIDE)]
         print(f"  {cam}: " + "  ".join(parts))
     a = np.asarray(result.area)
     print("  target areas: " + "  ".join(
-        f"{name} {100.0 * float(np.count_nonzero(a == code)) / n:5.1f}%" for code, name in
-        ((AREA_P4, "P4"), (AREA_P5, "P5"), (AREA_P6, "P6"))))
+        f"{code.short} {100.0 * float(np.count_nonzero(a == code)) / n:5.1f}%" for code in (Area.P4, Area.P5, Area.P6)))
     if result.flying is not None:
         how = "off" if not params.flying_filter else ("repaired" if params.flying_repair else "removed")
         print(f"  depth: {int(np.count_nonzero(result.flying))} flying pixels ({how}), "
@@ -177,49 +176,6 @@ def run(args: argparse.Namespace) -> int:
                   f"{cam} {100.0 * np.count_nonzero(m) / max(1, np.count_nonzero(result.cases[cam] == 1)):.1f}%"
                   for cam, m in result.mixed.items()) if result.mixed else ""))
     return 0
-
-
-def _tof_params(args: argparse.Namespace, params) -> None:
-    """The ToF options into ``params`` (InputError for values out of range)."""
-    if args.no_flying_filter:
-        params.flying_filter = False
-    if args.remove_flying:
-        params.flying_repair = False
-    if args.flying_jump is not None:
-        if not 0.0 < args.flying_jump < 1.0:
-            raise InputError(f"--flying-jump must be between 0 and 1 (a fraction of the depth), got {args.flying_jump:g}")
-        params.flying_jump_rel = float(args.flying_jump)
-    if args.no_fill_holes:
-        params.fill_holes = False
-    if args.no_denoise:
-        params.denoise = False
-    if args.denoise_size is not None:
-        if args.denoise_size < 3 or args.denoise_size > 15 or args.denoise_size % 2 == 0:
-            raise InputError(f"--denoise-size must be an odd number from 3 to 15, got {args.denoise_size}")
-        params.denoise_size = int(args.denoise_size)
-    if args.mixed_radius is not None:
-        if not 0.0 <= args.mixed_radius <= 50.0:
-            raise InputError(f"--mixed-radius must be between 0 and 50 source pixels, got {args.mixed_radius:g}")
-        params.mixed_radius_px = float(args.mixed_radius)
-
-
-def drop_mixed(result) -> None:
-    """NaN for the registered values of pixels flagged mixed (per source), in place (plain arrays
-    and :class:`~plantreg_gui.core.hits.HitImage` alike)."""
-    from ..core.hits import HitImage
-
-    for cam, m in result.mixed.items():
-        if cam not in result.registered or not np.any(m):
-            continue
-        img = result.registered[cam]
-        flagged = np.asarray(m, dtype=bool)
-        if isinstance(img, HitImage):
-            img.values[flagged.reshape(-1)[img.index]] = np.nan
-        else:
-            img[flagged] = np.nan
-
-
-_SHORT = {0: "P6", 1: "P1", 2: "P2", 3: "P3.1", 4: "P3.2", 5: "P5", 6: "outside"}
 
 
 def _command_line(args: argparse.Namespace) -> str:

@@ -24,7 +24,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--rig", type=Path, help="rig file (plantreg.rig JSON)")
     g.add_argument("--recording", type=Path, help="recording folder (with recording.json)")
     g.add_argument("--target", help="target camera to register to")
-    g.add_argument("--view", help="workspace view to show: raw, side-by-side, mosaic, masks, 3d")
+    from .registration.views import view_keys
+
+    g.add_argument("--view", help=f"workspace view to show: {', '.join(view_keys())}")
     g = p.add_argument_group("calibration wizard")
     g.add_argument("--calibrate-demo", action="store_true", help="open the synthetic calibration session of the demo")
     g.add_argument("--session", type=Path, help="open a capture session folder in the calibration wizard")
@@ -49,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     import multiprocessing
 
-    multiprocessing.freeze_support()  # the wizard's worker process (core/process_job.py) in a frozen app
+    multiprocessing.freeze_support()  # the wizard's worker process (core/jobs/process_job.py) in a frozen app
     args = build_parser().parse_args(argv)
     if args.install_desktop or args.uninstall_desktop:  # no Qt needed
         from ..desktop import main as desktop_main

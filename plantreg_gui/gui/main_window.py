@@ -35,6 +35,7 @@ class MainWindow(QMainWindow):
         from .calibration.wizard import CalibrationWizard
 
         self.workspace = RegistrationWorkspace(self)
+        self.workspace.landmarks_requested.connect(self.show_landmarks)
         self.wizard = CalibrationWizard(self)
         self.tabs.addTab(self.workspace, "Registration")
         self.tabs.addTab(self.wizard, "Calibration")

@@ -2,9 +2,8 @@
 that is cheap to draw with software OpenGL, and a staged build that keeps every GUI-thread slice
 short.
 
-Measured on the 3D tab's first show (Mesa llvmpipe, demo cloud of 55k points; per-step times in
-docs/workspace.md): the render window's default 8x multi-sampling costs ~60-90 ms of CPU per
-frame (about two thirds of a frame), every ``plotter.render()`` is followed by a second render
+On the 3D tab's first show (Mesa llvmpipe; per-step times in docs/workspace.md): the render
+window's default 8x multi-sampling costs most of a frame's CPU, every ``plotter.render()`` is followed by a second render
 when the widget repaints (pyvistaqt's ``paintGL`` always renders), and the first frame of each
 new kind of actor compiles its shaders. So the views ask for no multi-sampling, change the scene
 with ``render=False`` and let one repaint draw it (:func:`repaint`), and build a new scene in
@@ -70,7 +69,7 @@ def first_frame_held(plotter: Any) -> bool:
 
 def release_first_frame(plotter: Any) -> None:
     """Let ``plotter``'s widget draw the scene from now on, and repaint it. VTK's first frame in a
-    new render window (GL state, framebuffers, the first shaders: 65-125 ms with software OpenGL)
+    new render window (GL state, framebuffers, the first shaders: long with software OpenGL)
     then runs in an event-loop turn of its own instead of inside the widget's ``show()``."""
     if plotter is not None and first_frame_held(plotter):
         plotter.first_frame_held = False

@@ -1,8 +1,8 @@
 """What the application loads before its window appears.
 
-VTK (through pyvista/pyvistaqt) takes ~2 s to import, and most of that time is spent in C code
+VTK (through pyvista/pyvistaqt) is slow to import, and most of that time is spent in C code
 that holds the GIL (extension-module initialisation, PySide6's ``import *`` in qtpy). Importing it
-on a worker thread therefore still froze the GUI thread for 0.2-0.3 s at a time, in the middle of
+on a worker thread therefore still froze the GUI thread for visible moments, in the middle of
 the user's first registration. It is imported here instead, once, behind a splash screen, before
 any window can take input.
 """
@@ -13,21 +13,19 @@ import importlib
 import time
 
 #: Slow modules every session needs sooner or later (the 3D views). The three VTK modules are
-#: what the first pyvistaqt plotter imported on the GUI thread (its constructor: 121 -> 46 ms;
-#: 33 ms here).
+#: what the first pyvistaqt plotter imported on the GUI thread (figures: benchmarks/bench_gui_stalls.py).
 HEAVY_MODULES: tuple[str, ...] = ("pyvista", "pyvistaqt", "vtkmodules.vtkInteractionWidgets",
                                   "vtkmodules.vtkViewsContext2D", "vtkmodules.vtkViewsCore")
 
 
 def preload(modules: tuple[str, ...] = HEAVY_MODULES, open3d: bool = True) -> float:
     """Import ``modules`` on the calling (GUI) thread, and with ``open3d`` Open3D's compiled core
-    (``core/o3d_core.py``); returns the seconds it took. A module that fails to import is left for
+    (``core/geometry/o3d_core.py``); returns the seconds it took. A module that fails to import is left for
     the view that needs it to report.
 
     Why Open3D: its core (the ray caster of every registration, and of the landmark page's
-    overlay) takes ~0.7 s to initialise, mostly in C holding the GIL; first loaded on a worker, it
-    froze the GUI thread during the landmark page's first open (longest gap 0.17-0.36 s; 0.11-0.13 s
-    with it loaded before)."""
+    overlay) is slow to initialise, mostly in C holding the GIL; first loaded on a worker, it
+    froze the GUI thread during the landmark page's first open (benchmarks/bench_gui_stalls.py)."""
     t0 = time.perf_counter()
     for name in modules:
         try:
@@ -36,7 +34,7 @@ def preload(modules: tuple[str, ...] = HEAVY_MODULES, open3d: bool = True) -> fl
             pass
     if open3d:
         try:
-            from ..core.o3d_core import open3d_core
+            from ..core.geometry.o3d_core import open3d_core
 
             open3d_core()
         except Exception:  # noqa: BLE001 - reported by the registration that needs it

@@ -146,3 +146,68 @@ def show_error(parent: QWidget | None, title: str, message: str, details: str = 
         box.setDetailedText(details)
     box.setObjectName("errorDialog")
     box.open()
+
+
+class Jobs:
+    """The one GUI job runner: starts :class:`Worker` s, routes their outcome and keeps them until
+    they are done. A window or page gives its own ways of showing progress and cancellation; an
+    error always becomes a dialog (:func:`show_error`).
+
+    ``on_progress(title, fraction, message)``, ``on_cancelled(title)``, ``on_end(worker)`` after
+    any outcome (the worker is no longer listed then). ``bool(jobs)``: any worker still running.
+    """
+
+    def __init__(self, parent: QWidget | None, on_progress: Callable[[str, float, str], None] | None = None,
+                 on_cancelled: Callable[[str], None] | None = None,
+                 on_end: Callable[[Worker], None] | None = None):
+        self.parent = parent
+        self.on_progress, self.on_cancelled, self.on_end = on_progress, on_cancelled, on_end
+        self.workers: list[Worker] = []
+
+    def start(self, w: Worker, title: str, on_done: Callable[[Any], None], error_title: str | None = None,
+              on_end: Callable[[Worker], None] | None = None,
+              on_failed: Callable[[str, str], None] | None = None, background: bool = False) -> Worker:
+        """Start ``w``: ``on_done(result)`` on success; a failure is shown as ``error_title``
+        (default "<title> failed") unless ``on_failed(message, details)`` handles it; ``on_end(w)``
+        (else the runner's) after any outcome. ``background``: no progress or cancel reports (a
+        preview the page refreshes by itself)."""
+        self.workers.append(w)
+        if self.on_progress is not None and not background:
+            w.progress.connect(lambda f, m, t=title: self.on_progress(t, f, m))
+        w.finished.connect(on_done)
+        if on_failed is not None:
+            w.failed.connect(on_failed)
+        else:
+            w.failed.connect(lambda msg, det, t=error_title or f"{title} failed": show_error(self.parent, t, msg, det))
+        if self.on_cancelled is not None and not background:
+            w.cancelled.connect(lambda t=title: self.on_cancelled(t))
+        end = on_end or self.on_end
+        w.done.connect(lambda w=w: self._done(w, end))
+        w.start()
+        return w
+
+    def _done(self, w: Worker, end: Callable[[Worker], None] | None) -> None:
+        if w in self.workers:
+            self.workers.remove(w)
+        if end is not None:
+            end(w)
+
+    def __bool__(self) -> bool:
+        return bool(self.workers)
+
+    def __contains__(self, w: object) -> bool:
+        return w in self.workers
+
+    def __iter__(self):
+        return iter(list(self.workers))
+
+    def cancel_all(self) -> None:
+        for w in list(self.workers):
+            w.cancel()
+
+    def wait_all(self, ms: int = 30000) -> None:
+        """Cancel every worker and wait for its thread (closing a window)."""
+        for w in list(self.workers):
+            w.cancel()
+        for w in list(self.workers):
+            w.wait(ms)

@@ -31,10 +31,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ..camera import Camera
+from ..camera.camera import Camera
 from ..errors import InputError
 from ..progress import Reporter, ensure_reporter
-from ..rig import Rig
+from ..camera.rig import Rig
 from .board import Board
 from .detect import FOUND, MISSING, Detection, check_image_sizes, suggest_board_size
 from .session import Session
@@ -316,7 +316,7 @@ def _too_few_message(session: Session, cam: str, views: dict[str, Detection],
     if not mine:
         msg += f". No pose folder has an image named after the camera ('{cam}.png', '{cam}.tif', ...)"
     if not views and failed and session.board.type == "chessboard":
-        from ..imageio import read_image
+        from ..io.imageio import read_image
 
         imgs = []
         for d in failed[:3]:

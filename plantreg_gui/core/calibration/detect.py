@@ -38,9 +38,9 @@ from typing import Any, Iterator
 import cv2
 import numpy as np
 
-from .. import modality as _modality
+from ..camera import modality as _modality
 from ..errors import InputError
-from ..imageio import read_image
+from ..io.imageio import read_image
 from ..progress import Reporter, ensure_reporter
 from .board import Board
 

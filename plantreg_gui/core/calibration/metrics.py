@@ -36,7 +36,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
-from ..imageio import atomic_write_text, read_image
+from ..io.imageio import atomic_write_text, read_image
 from ..progress import Reporter, ensure_reporter
 from .calibrate import Calibration, _per_view_errors, usable_views
 from .detect import Detection
@@ -204,7 +204,8 @@ def error_tables(session: Session, calibration: Calibration, detections: dict[tu
     """Compute the three tables (see the module docstring) over the found, not excluded views.
     ``roi`` (min (3,), max (3,)) in the rig frame overrides the per-pose box around the board
     used to mesh the depth maps."""
-    from ..register import RegistrationParams, transport_pixels
+    from ..registration.params import RegistrationParams
+    from ..registration.transport import transport_pixels
 
     progress = ensure_reporter(progress)
     cal = calibration

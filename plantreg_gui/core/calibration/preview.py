@@ -1,7 +1,7 @@
 """Display thumbnails of calibration images and detection with a thumbnail (Qt-free).
 
 :func:`detect_with_thumbnail` is what the wizard runs per image in its worker process (see
-:mod:`plantreg_gui.core.process_job`): reading, detecting and shrinking an image all happen
+:mod:`plantreg_gui.core.jobs.process_job`): reading, detecting and shrinking an image all happen
 there, so the GUI process only receives the detection and a 112-pixel thumbnail.
 """
 
@@ -54,7 +54,7 @@ def detect_with_thumbnail(session, pose: str, camera: str, options: DetectOption
                           size: int = 112, progress: Reporter | None = None) -> tuple[Detection, np.ndarray | None]:
     """:func:`~.detect.detect_view` of (``pose``, ``camera``) and a ``size``-pixel display
     thumbnail of the image (None if it has none). Unreadable images raise ``InputError``."""
-    from ..imageio import read_image
+    from ..io.imageio import read_image
 
     p = session.pose(pose)
     path = p.images.get(camera)

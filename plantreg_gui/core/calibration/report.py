@@ -14,9 +14,9 @@ import numpy as np
 
 from ... import __version__
 from ..errors import InputError
-from ..imageio import atomic_files
+from ..io.imageio import atomic_files
 from ..progress import Reporter, ensure_reporter
-from ..rig import Rig
+from ..camera.rig import Rig
 from .calibrate import Calibration, calibrate
 from .detect import Detection, DetectOptions, detect_session
 from .metrics import CalibrationReport, error_tables
@@ -79,7 +79,7 @@ def write_report(report: CalibrationReport, path: str | Path) -> list[Path]:
 def write_calibration(rig: Rig | None, rig_path: str | Path | None, report: CalibrationReport | None = None,
                       report_path: str | Path | None = None) -> list[Path]:
     """Write the rig file, the report JSON and its CSV tables as ONE transaction
-    (:func:`~plantreg_gui.core.imageio.atomic_files`): all of them appear together, or none and
+    (:func:`~plantreg_gui.core.io.imageio.atomic_files`): all of them appear together, or none and
     the previous set stays as it was (a full disk, a permission error, Ctrl-C or SIGTERM never
     leave a report without its rig, or destroy the previous report). CSVs of a previous report
     that the new one does not have are removed with it. Returns the written paths (report JSON,

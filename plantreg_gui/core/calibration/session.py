@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .. import modality
+from ..camera import modality
 from ..errors import InputError
-from ..imageio import IMAGE_SUFFIXES, atomic_write_text, read_json
+from ..io.imageio import IMAGE_SUFFIXES, atomic_write_text, read_json
 from .board import Board
 
 SESSION_FILE = "session.json"

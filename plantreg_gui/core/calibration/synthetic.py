@@ -27,12 +27,12 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ..camera import Camera
-from ..imageio import atomic_output_dir, atomic_write_text, write_png, write_tiff
+from ..camera.camera import Camera
+from ..io.imageio import atomic_output_dir, atomic_write_text, write_png, write_tiff
 from ..progress import Reporter, ensure_reporter
-from ..rig import Rig
+from ..camera.rig import Rig
 from .board import Board
-from .. import modality as _modality
+from ..camera import modality as _modality
 from .session import SESSION_FILE
 
 TRUTH_FILE = "truth.json"

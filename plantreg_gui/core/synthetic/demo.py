@@ -14,11 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from ..camera import Camera
+from ..camera.camera import Camera
 from ..errors import InputError
-from ..imageio import atomic_output_dir, atomic_write_text, write_png, write_tiff
+from ..io.imageio import atomic_output_dir, atomic_write_text, write_png, write_tiff
 from ..progress import Reporter, ensure_reporter
-from ..rig import Rig
+from ..camera.rig import Rig
 from .render import ground_truth, render_recording
 from .scene import GROUND_Z, make_plant_scene
 

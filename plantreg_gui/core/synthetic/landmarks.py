@@ -5,8 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..landmarks import Landmark
-from ..rig import Rig
+from ..data.landmarks import Landmark
+from ..camera.rig import Rig
 from .scene import MAT_GROUND, Scene
 
 

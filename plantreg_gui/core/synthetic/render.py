@@ -15,11 +15,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..camera import Camera
+from ..camera.camera import Camera
 from ..errors import InputError
 from ..progress import Reporter, ensure_reporter
-from ..recording import Recording
-from ..rig import Rig
+from ..data.recording import Recording
+from ..camera.rig import Rig
 from .scene import MAT_GROUND, Scene
 from .textures import NIR_850, RGB_ALBEDO, Appearance, endmember_spectra
 
@@ -341,7 +341,7 @@ class GroundTruth:
 
     def save(self, path: str | Path) -> None:
         """Write a compressed ``.npz`` (keys ``uv/<src>``, ``visible/<src>``, ...), atomically."""
-        from ..imageio import atomic_path
+        from ..io.imageio import atomic_path
 
         arrays: dict[str, np.ndarray] = {
             "target": np.array(self.target), "points_rig": self.points_rig, "material": self.material,

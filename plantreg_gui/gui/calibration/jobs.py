@@ -11,7 +11,7 @@ import numpy as np
 
 from ...core.calibration import Detection, calibrate, calibrated_rig, error_tables
 from ...core.calibration.preview import detect_with_thumbnail
-from ...core.process_job import run_in_process
+from ...core.jobs.process_job import run_in_process
 from ...core.progress import Reporter, ensure_reporter
 
 Key = tuple[str, str]
@@ -47,7 +47,7 @@ def detect_job(session, options: dict | None, keys: set[Key] | None, sink: Calla
 
 def calibrate_job(session, detections: dict, excluded: set[Key], progress: Reporter | None = None):
     """The calibration, in the worker process: its bundle adjustment loops in Python and would
-    hold the GIL against the GUI thread for seconds (see :mod:`~plantreg_gui.core.process_job`)."""
+    hold the GIL against the GUI thread for seconds (see :mod:`~plantreg_gui.core.jobs.process_job`)."""
     return run_in_process(calibrate, session, detections, excluded, progress=progress)
 
 

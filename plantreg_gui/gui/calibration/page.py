@@ -18,7 +18,7 @@ from typing import Protocol
 import numpy as np
 from PySide6.QtWidgets import QWidget
 
-from .model import Key, WizardModel
+from ...models.calibration import Key, WizardModel
 
 
 class WizardActions(Protocol):

@@ -295,7 +295,7 @@ class ReviewPage(WizardPage):
             self.cov_cam.setCurrentText(self.current[1])
 
     def _image(self, key) -> np.ndarray | None:
-        from ...core.imageio import read_image
+        from ...core.io.imageio import read_image
 
         if key in self._cache:
             self._cache.move_to_end(key)

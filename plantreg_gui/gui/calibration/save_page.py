@@ -260,7 +260,7 @@ class SavePage(WizardPage):
         return True
 
     def _read_depth(self, path: Path) -> np.ndarray:
-        from ...core.imageio import read_image
+        from ...core.io.imageio import read_image
 
         d = read_image(path)
         if d.ndim == 3:
@@ -401,7 +401,7 @@ class SavePage(WizardPage):
 
     def _roi_banner(self, X: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
         """Say what the ROI does to a plant's depth map; ask for one while none is loaded."""
-        from ...core.roi import CUT_WARN_FRACTION, cut_fraction
+        from ...core.geometry.roi import CUT_WARN_FRACTION, cut_fraction
 
         if not np.all(lo < hi):
             return
@@ -421,7 +421,7 @@ class SavePage(WizardPage):
 
     def fit_roi(self) -> bool:
         """Fit the ROI to the shown plant depth map (core.roi.fit_roi); False for a board pose."""
-        from ...core.roi import fit_roi
+        from ...core.geometry.roi import fit_roi
 
         src = self.source()
         res = self.points()

@@ -23,7 +23,7 @@ from .capture_page import CapturePage
 from .depth_page import DepthPage
 from .extrinsics_page import ExtrinsicsPage
 from .intrinsics_page import IntrinsicsPage
-from .model import WizardModel
+from ...models.calibration import WizardModel
 from .review_page import ReviewPage
 from .rig_page import RigPage
 from .save_page import SavePage
@@ -148,7 +148,7 @@ class CalibrationWizard(QWidget):
         self.model.set_session(session)
         self._update_nav()
         if session.poses:
-            from ...core.process_job import warm_up
+            from ...core.jobs.process_job import warm_up
 
             warm_up()  # the calibration's process starts importing while corners are detected
             self._ensure(("detect",))

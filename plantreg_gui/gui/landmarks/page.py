@@ -1,4 +1,4 @@
-"""The landmark page: a view of :class:`~plantreg_gui.core.landmark_session.LandmarkSession`.
+"""The landmark page: a view of :class:`~plantreg_gui.models.landmarks.LandmarkSession`.
 
 Left: the depth camera's image (infrared), right: the chosen camera, third: the chosen camera
 registered into the infrared by the current rig (blend / checkerboard / flicker). Click a point
@@ -7,6 +7,9 @@ placement); the residual of every point is drawn next to it (red line: where the
 Fit, refine (on workers, with progress and cancel), nudge the camera's pose with keys, undo,
 save. All state and computation are in the session; this widget only shows it and forwards
 the user's actions.
+
+Length: the page's layout, its three image panes and their click handling; the state is in the
+Qt-free :class:`~plantreg_gui.models.landmarks.LandmarkSession`.
 """
 
 from __future__ import annotations
@@ -22,14 +25,14 @@ from PySide6.QtWidgets import (
     QVBoxLayout, QWidget,
 )
 
-from ...core import modality
-from ...core.display import blend, checkerboard, default_tile, to_rgb8
+from ...core.camera import modality
+from ...core.display.display import blend, checkerboard, default_tile, to_rgb8
 from ...core.errors import PlantregError
-from ...core.landmark_session import LandmarkSession, OverlayImages
+from ...models.landmarks import LandmarkSession, OverlayImages
 from ...core.progress import Reporter
-from ..workers import Worker, show_error
+from ..workers import Jobs, Worker, show_error
 from ..registration.image_views import ColourBar
-from ..registration.model import DEPTH, DisplaySettings, Layer, colour_bar_of, raw_layers
+from ...models.layers import DEPTH, DisplaySettings, Layer, colour_bar_of, raw_layers
 from .point_view import Marker, PointView
 
 #: keys of the nudge panel: key -> (kind, camera axis, sign). Rotations about the camera's own
@@ -61,8 +64,8 @@ def shown_rgb8(s: LandmarkSession, camera: str, key: str | None = None) -> np.nd
 def read_session(rig: str | Path, landmarks: str | Path | None, recordings: list[str | Path],
                  progress: Reporter) -> tuple[LandmarkSession, dict[tuple[str, str], np.ndarray]]:
     """The page's opening, for a worker: the session with every recording read, and the current
-    recording's images as shown, by (recording, camera) (a hyperspectral cube's false colour took
-    0.1-0.17 s on the GUI thread)."""
+    recording's images as shown, by (recording, camera) (a hyperspectral cube's false colour is
+    too slow for the GUI thread)."""
     s = LandmarkSession.load(rig, landmarks, recordings, progress=progress.sub(0.0, 0.85))
     shown = {}
     names = [s.rig.depth().name] + s.camera_names()
@@ -84,7 +87,10 @@ class LandmarkPage(QWidget):
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.session: LandmarkSession | None = None
-        self._workers: set[Worker] = set()
+        self._workers = Jobs(self, on_progress=lambda t, f, m: (self.progress.setValue(int(1000 * f)),
+                                                                 self.hint.setText(m)),
+                             on_cancelled=lambda t: self.hint.setText(f"{t} cancelled."),
+                             on_end=lambda w: (self._sync_enabled(), self.progress.setValue(0)))
         self._fit_worker: Worker | None = None
         self._refine_worker: Worker | None = None
         self._overlay_worker: Worker | None = None
@@ -283,7 +289,7 @@ class LandmarkPage(QWidget):
     # ------------------------------------------------------------------ session
     def open(self, rig: str | Path, landmarks: str | Path | None = None,
              recordings: list[str | Path] | None = None) -> Worker:
-        """Open files on a worker (reading the recordings took ~0.3 s on the GUI thread): the page
+        """Open files on a worker (reading the recordings is too slow for the GUI thread): the page
         says it is reading, Cancel stops it, a bad file becomes a "Cannot open" dialog naming it,
         and the session read replaces the shown one. Opening again while reading drops the
         earlier read (its result, error or cancellation no longer concern the page)."""
@@ -491,7 +497,7 @@ class LandmarkPage(QWidget):
             if rep:
                 text.append("\nBefore the nudges:")
         if "per_camera" in rep:
-            from ...core.rigfit import format_report
+            from ...core.rigfit.rigfit import format_report
 
             text.append(format_report(rep))
         if "refine" in rep or "cameras" in rep:
@@ -583,13 +589,7 @@ class LandmarkPage(QWidget):
         return frozenset(items)
 
     def _start(self, w: Worker, on_done, label: str, title: str | None = None) -> Worker:
-        self._workers.add(w)
-        w.progress.connect(lambda f, m: (self.progress.setValue(int(1000 * f)), self.hint.setText(m)))
-        w.finished.connect(on_done)
-        w.failed.connect(lambda msg, det: show_error(self, title or label, msg, det))
-        w.cancelled.connect(lambda: self.hint.setText(f"{label} cancelled."))
-        w.done.connect(lambda: (self._workers.discard(w), self._sync_enabled(), self.progress.setValue(0)))
-        w.start()
+        self._workers.start(w, label, on_done, error_title=title or label)
         self._sync_enabled()
         return w
 
@@ -649,11 +649,9 @@ class LandmarkPage(QWidget):
             return
         w = Worker(job)
         self._overlay_worker = w
-        self._workers.add(w)
-        w.finished.connect(self._overlay_finished)
-        w.failed.connect(lambda msg, det: self.overlay_label.setText(f"overlay failed: {msg}"))
-        w.done.connect(lambda: (self._workers.discard(w), self._overlay_again()))
-        w.start()
+        self._workers.start(w, "Overlay", self._overlay_finished, background=True,
+                            on_failed=lambda msg, det: self.overlay_label.setText(f"overlay failed: {msg}"),
+                            on_end=lambda w: self._overlay_again())
 
     def _overlay_again(self) -> None:
         if self._overlay_dirty:

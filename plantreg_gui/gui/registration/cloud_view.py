@@ -15,7 +15,7 @@ from PySide6.QtWidgets import (
 )
 
 from ..plotter3d import Stages, first_frame_held, make_plotter, release_first_frame, repaint
-from .model import Cloud
+from ...models.layers import Cloud
 
 MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
 
@@ -132,7 +132,7 @@ class CloudView(QWidget):
         self.plotter = plotter
         self._axes = False
         # hidden until show_gl_widget, which paints the background only; VTK's first frame
-        # (~100 ms with software GL) follows in first_frame, each in an event-loop turn of its own
+        # (long with software GL) follows in first_frame, each in an event-loop turn of its own
         plotter.interactor.hide()
         # a plain background: a gradient is one more shader to compile in the first frame
         self.plotter.set_background("#22272e")
@@ -145,7 +145,7 @@ class CloudView(QWidget):
 
     def attach_gl_widget(self) -> None:
         """Put the (hidden) GL widget into the window. The first one makes Qt re-create the
-        window's native surface for OpenGL composition (60-190 ms with software OpenGL), so
+        window's native surface for OpenGL composition (long with software OpenGL), so
         this is a stage of its own, apart from the plotter's constructor."""
         w = self.plotter.interactor if self.plotter is not None else None
         if w is not None and w.parent() is not self.host:
@@ -370,6 +370,25 @@ class CloudView(QWidget):
         return self
 
     # ------------------------------------------------------------------ teardown
+    # -- the workspace's view hooks (views.py)
+    def on_shown(self) -> None:
+        self.show_staged()  # over several event-loop turns: no stall
+
+    def prepare_screenshot(self) -> None:
+        self.render_now()
+
+    def view_rgb(self):
+        """The rendered scene at the window's size, (H, W, 3) uint8; None before there is one."""
+        import numpy as np
+
+        self.render_now()
+        if self.plotter is None:
+            return None
+        return np.ascontiguousarray(np.asarray(self.plotter.screenshot(None, return_img=True))[..., :3])
+
+    def shutdown(self) -> None:
+        self.close_plotter()
+
     def close_plotter(self) -> None:
         self._stages.cancel()
         if self.plotter is not None:

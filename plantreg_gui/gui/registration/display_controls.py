@@ -13,8 +13,9 @@ from PySide6.QtWidgets import (
 
 import numpy as np
 
-from ...core import display, modality
-from .model import COLORMAPS, DisplaySettings, Layer
+from ...core.display import display
+from ...core.camera import modality
+from ...models.layers import COLORMAPS, DisplaySettings, Layer
 
 
 class BandSpinBox(QSpinBox):
@@ -154,7 +155,7 @@ class DisplayControls(QGroupBox):
             return
         s = self.settings_for(L.name)
         self._loading = True
-        is_cube = L.bands > 3 or (L.bands == 3 and modality.is_cube(L.modality))
+        is_cube = L.is_cube
         single = L.bands == 1
         self.cmap.setEnabled(single)
         i = self.cmap.findData(s.cmap) if s.cmap else 0

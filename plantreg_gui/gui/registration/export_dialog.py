@@ -1,5 +1,5 @@
-"""Export dialog: choose a folder and the parts to write; the workspace runs
-:func:`plantreg_gui.core.export.write_outputs` on a worker."""
+"""Export dialog: choose a folder, the parts to write and whether mixed pixels are dropped; the
+workspace runs the pipeline's export (:func:`plantreg_gui.core.pipeline.pipeline.export`) on a worker."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from PySide6.QtWidgets import (
 
 def parts() -> dict[str, str]:
     """Output part -> label shown to the user, from the core's one registry (core.export.OUTPUT_PARTS)."""
-    from ...core.export import OUTPUT_PARTS  # on demand: the export module pulls in the registration engine
+    from ...core.export.export import OUTPUT_PARTS  # on demand: the export module pulls in the registration engine
 
     return {p.key: p.label for p in OUTPUT_PARTS}
 
@@ -42,6 +42,9 @@ class ExportDialog(QDialog):
             cb.setChecked(True)
             self.boxes[key] = cb
             bl.addWidget(cb)
+        self.drop = QCheckBox("Drop mixed pixels (NaN where a pixel's footprint crosses a silhouette)")
+        self.drop.setToolTip("as plantreg register --drop-mixed: the registered images get NaN where a "
+                             "pixel is flagged mixed; the view here keeps its values")
         note = QLabel("The folder is written under a temporary name and moved into place when complete. "
                       "An existing, non-empty folder is replaced only after you confirm.")
         note.setWordWrap(True)
@@ -53,6 +56,7 @@ class ExportDialog(QDialog):
         lay = QVBoxLayout(self)
         lay.addLayout(row)
         lay.addWidget(box)
+        lay.addWidget(self.drop)
         lay.addWidget(note)
         lay.addWidget(self.buttons)
         # Export only with a folder and at least one part: an empty field would mean the current
@@ -84,3 +88,6 @@ class ExportDialog(QDialog):
 
     def what(self) -> list[str]:
         return [k for k, cb in self.boxes.items() if cb.isChecked()]
+
+    def drop_mixed(self) -> bool:
+        return self.drop.isChecked()

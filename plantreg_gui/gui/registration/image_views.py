@@ -4,6 +4,9 @@ An :class:`ImageView` shows an (H, W, 3) uint8 array as a QImage pixmap (plus an
 RGBA overlay and a crosshair). Views in one :class:`ViewLink` share zoom, scroll position and
 cursor, as 3D Slicer's linked compare views do. Scene coordinates are image pixels with pixel
 centres at integer + 0.5 (Qt's pixmap corner convention): pixel (row, col) = floor(y), floor(x).
+
+Length: the raw and side-by-side views share the image canvas, its overlays, region drawing and
+read-out; a module per view would import the canvas and little else.
 """
 
 from __future__ import annotations
@@ -374,7 +377,7 @@ class ColourBar(QWidget):
         if cmap is None or limits is None:
             self.hide()
             return
-        from ...core import display
+        from ...core.display import display
 
         lut = display.colormap_lut(cmap)
         ramp = np.ascontiguousarray(np.repeat(lut[None, :, :], 10, axis=0))
@@ -440,7 +443,7 @@ class SpectrumPlot(QWidget):
         from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
         from matplotlib.figure import Figure
 
-        # fixed margins: a constrained layout is re-solved on every draw (~0.1-0.5 s on the GUI thread)
+        # fixed margins: a constrained layout is re-solved on every draw (a stall of the GUI thread)
         self.figure = Figure(figsize=(4, 1.6), dpi=90)
         self.figure.subplots_adjust(left=0.17, right=0.97, top=0.86, bottom=0.25)
         self.canvas = FigureCanvasQTAgg(self.figure)

@@ -12,10 +12,10 @@ from PySide6.QtWidgets import (
     QSlider, QSplitter, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
 )
 
-from ...core import display
-from ...core.cases import AREA_NAMES, CASE_NAMES
+from ...core.display import display
+from ...core.registration.cases import AREA_NAMES, CASE_NAMES
 from .image_views import ImageView
-from .model import case_table
+from ...models.layers import case_table
 
 
 #: overlay colours of the other masks: red mixed edge pixels, blue flying pixels
@@ -228,7 +228,7 @@ class MasksView(QWidget):
             return None
         op = self.opacity.value() / 100.0
         # the base is dimmed to grey so the overlay colours read clearly (OpenCV: a float mean of a
-        # 4K picture on the GUI thread took ~0.5 s)
+        # 4K picture stalls the GUI thread)
         out = cv2.cvtColor(cv2.cvtColor(np.ascontiguousarray(base), cv2.COLOR_RGB2GRAY), cv2.COLOR_GRAY2RGB)
         if self.show_areas.isChecked() and self.area is not None:
             on = self.area_legend.enabled_codes()

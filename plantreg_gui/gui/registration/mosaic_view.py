@@ -9,7 +9,7 @@ from PySide6.QtWidgets import (
     QCheckBox, QComboBox, QHBoxLayout, QLabel, QSlider, QSpinBox, QVBoxLayout, QWidget,
 )
 
-from ...core import display
+from ...core.display import display
 from .image_views import ImageView
 
 MODES = {"mosaic": "Mosaic (all modalities)", "checkerboard": "Checkerboard A | B", "blend": "Blend A → B"}
@@ -184,6 +184,9 @@ class MosaicView(QWidget):
         self._flick_state ^= 1
         self.update_view()
 
+    def shutdown(self) -> None:  # the workspace's view hook (views.py)
+        self.stop()
+
     def stop(self) -> None:
         self._flick_timer.stop()
 
@@ -193,7 +196,7 @@ class MosaicView(QWidget):
     def bind(self, session) -> "MosaicView":
         """Show ``session``'s registered renderings; hovering moves its cursor."""
         from .image_views import home_rect
-        from .model import DEPTH
+        from ...models.layers import DEPTH
 
         def refresh() -> None:
             cams = [L.name for L in session.layers if L.name != DEPTH]

@@ -16,11 +16,11 @@ class ParamsPanel(QGroupBox):
         super().__init__("Registration", parent)
         self.session = session
         p = session.params
-        self.edge = self._box(0.5, 89.0, p.edge_angle_deg, " °", 1,
+        self.edge = self._box("edge_angle_deg", p.edge_angle_deg, " °",
                               "mesh edge cut: a depth-map edge seen more obliquely than this is cut (docs/registration.md)")
-        self.occlusion = self._box(0.0, 50.0, p.occlusion_tol_m * 1000, " mm", 1,
+        self.occlusion = self._box("occlusion_tol_m", p.occlusion_tol_m, " mm",
                                    "a source-ray hit this much before the point counts as an occlusion (P2)")
-        self.uncertainty = self._box(0.0, 50.0, p.uncertainty_tol_m * 1000, " mm", 1,
+        self.uncertainty = self._box("uncertainty_tol_m", p.uncertainty_tol_m, " mm",
                                      "an uncertainty-mesh hit this much before the point counts (P3.1, P3.2)")
         form = QFormLayout(self)
         form.addRow("Edge angle", self.edge)
@@ -33,11 +33,16 @@ class ParamsPanel(QGroupBox):
             sb.valueChanged.connect(self._changed)
 
     @staticmethod
-    def _box(lo: float, hi: float, v: float, suffix: str, decimals: int, tip: str) -> QDoubleSpinBox:
+    def _box(key: str, v: float, suffix: str, tip: str) -> QDoubleSpinBox:
+        """A spin box for parameter ``key``, its range from the parameters' one table (shown in
+        the table's unit: ``value * scale``)."""
+        from ...core.registration.params import LIMITS
+
+        lim = LIMITS[key]
         sb = QDoubleSpinBox()
-        sb.setRange(lo, hi)
-        sb.setDecimals(decimals)
-        sb.setValue(v)
+        sb.setRange(lim.lo * lim.scale, lim.hi * lim.scale)
+        sb.setDecimals(1)
+        sb.setValue(v * lim.scale)
         sb.setSuffix(suffix)
         sb.setToolTip(tip)
         sb.setKeyboardTracking(False)  # one change per edit, not per typed digit

@@ -1,7 +1,7 @@
 """The region tool's panel: choose rectangle or polygon, draw it on the registered images (Side by
 side), read the chosen source's statistics over it, export them as CSV.
 
-The statistics are computed by the core (:mod:`plantreg_gui.core.region`) through the session;
+The statistics are computed by the core (:mod:`plantreg_gui.core.registration.region`) through the session;
 this panel only shows ``session.region_stats`` and asks for a file name.
 """
 
@@ -14,7 +14,7 @@ from PySide6.QtWidgets import (
 )
 
 from .image_views import SpectrumPlot
-from .model import format_value
+from ...models.layers import format_value
 
 
 class RegionPanel(QGroupBox):

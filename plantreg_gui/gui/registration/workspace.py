@@ -4,6 +4,9 @@ The session (Qt-free) holds the rig, recording, result, layers, display settings
 and cursor and emits events; the views (registered in :mod:`.views`) subscribe to it. This
 widget owns only what is Qt's business: the toolbar and menus, the worker threads that run the
 session's jobs (:class:`~plantreg_gui.gui.workers.Worker`), dialogs, recent files and drops.
+
+Length: the window's menus, toolbar, views, drag and drop, recent files and jobs; the state
+is in the Qt-free :class:`~.session.RegistrationSession`.
 """
 
 from __future__ import annotations
@@ -14,7 +17,6 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable
 
-import numpy as np
 from PySide6.QtCore import QEvent, QSettings, Qt, Signal
 from PySide6.QtGui import QKeySequence
 from PySide6.QtWidgets import (
@@ -23,18 +25,19 @@ from PySide6.QtWidgets import (
     QStatusBar, QTabWidget, QToolBar, QToolButton, QVBoxLayout, QWidget,
 )
 
-from ...core import plant3d
+from ...core.data import plant3d
 from ...core.errors import InputError, PlantregError
-from ...core.recording import MANIFEST
-from ...core.rig import Rig
-from ..workers import Worker, show_error
+from ...core.data.recording import MANIFEST
+from ...core.camera.rig import Rig
+from ...models.layers import DisplaySettings
+from ...models.registration import (RegistrationSession, check_is_rig_file, demo_job, kind_of_path, load_job,
+                                   plant3d_job, register_job)
+from ..workers import Jobs, Worker, show_error
 from .display_controls import DisplayControls
 from .export_dialog import ExportDialog, folder_is_nonempty
 from .image_views import SpectrumPlot
-from .model import DisplaySettings
 from .params_panel import ParamsPanel
 from .region_panel import RegionPanel
-from .session import RegistrationSession, demo_job, load_job, plant3d_job, register_job
 from .views import VIEWS, view_key
 
 RECENT_KEY = "workspace/recent"
@@ -71,21 +74,6 @@ class _EmptyNote(QLabel):
             self.raise_()
 
 
-def _check_is_rig_file(path: Path) -> None:
-    """Refuse a JSON file that is plainly something else (a recording manifest, a session, any JSON)
-    with "not a rig file" rather than a complaint about its missing cameras."""
-    if not path.is_file():
-        return  # Rig.load names the missing file
-    try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
-        return  # Rig.load explains unreadable files
-    if isinstance(d, dict) and "cameras" not in d and d.get("format") != "plantreg.rig":
-        what = "a recording manifest" if path.name == MANIFEST else "a JSON file without \"cameras\""
-        raise InputError(f"not a rig file ({what}); a rig file lists the cameras with their intrinsics and "
-                         "extrinsics", path)
-
-
 # ---------------------------------------------------------------------- the widget
 class RegistrationWorkspace(QWidget):
     """See the module docstring. Signals: ``registered(result)`` after each registration,
@@ -94,13 +82,17 @@ class RegistrationWorkspace(QWidget):
     idle = Signal()
     registered = Signal(object)
     exported = Signal(object)
+    #: File > Fit rig from landmarks: (rig path or None, recording folder or None); the window opens the page
+    landmarks_requested = Signal(object, object)
 
     def __init__(self, parent: QWidget | None = None, session: RegistrationSession | None = None):
         super().__init__(parent)
         self.setAcceptDrops(True)
         self.session = session or RegistrationSession()
         self.last_export: Path | None = None
-        self._workers: list[Worker] = []
+        self._workers = Jobs(self, on_progress=self._progress,
+                             on_cancelled=lambda t: self.readout.setText(f"{t}: cancelled."),
+                             on_end=self._worker_done)
         self._view_chosen = False
         self._demo_tmp: tempfile.TemporaryDirectory | None = None
         self._build_ui()
@@ -142,7 +134,8 @@ class RegistrationWorkspace(QWidget):
         self.file_menu.addAction("Open Plant3DImageReg recording…", lambda: self._guard(self._ask_plant3d))
         self.recent_menu = self.file_menu.addMenu("Open recent")
         self.recent_menu.aboutToShow.connect(self._fill_recent)
-        self.file_menu.addAction("Fit rig from landmarks…", lambda: self.window().show_landmarks(self.rig_path, getattr(self.recording, "folder", None)))  # noqa: E501
+        self.file_menu.addAction("Fit rig from landmarks…", lambda: self.landmarks_requested.emit(
+            self.rig_path, getattr(self.recording, "folder", None)))
         self.file_menu.addSeparator()
         self.file_menu.addAction("Load demo", lambda: self._guard(self.load_demo))
         self.export_action = self.file_menu.addAction("Export…", self._ask_export)
@@ -318,7 +311,7 @@ class RegistrationWorkspace(QWidget):
         if ok:
             self.controls.layer.setCurrentText(r.target)
             warnings = list(getattr(r, "warnings", []) or [])
-            if warnings:  # e.g. the ROI cuts off most of the measured depth (core/roi.py)
+            if warnings:  # e.g. the ROI cuts off most of the measured depth (core/geometry/roi.py)
                 self.banner.setText(" ".join(warnings))
                 self.banner.show()
             elif s.plant is None and s.rig is not None:
@@ -349,18 +342,20 @@ class RegistrationWorkspace(QWidget):
         w = self.tabs.currentWidget()
         return next(k for k, v in self.views.items() if v is w)
 
+    def _hook(self, name: str, *views: Any) -> None:
+        """Call the optional hook ``name`` of ``views`` (default: every view; see views.py)."""
+        for v in views or tuple(self.views.values()):
+            fn = getattr(v, name, None)
+            if fn is not None:
+                fn()
+
     def prepare_screenshot(self) -> None:
-        if self.current_view() == "3d":
-            self.cloud_view.render_now()
+        self._hook("prepare_screenshot", self.tabs.currentWidget())
 
     def shutdown(self) -> None:
         self.session.pending_target = None
-        for w in list(self._workers):
-            w.cancel()
-        for w in list(self._workers):
-            w.wait(30000)
-        self.mosaic_view.stop()
-        self.cloud_view.close_plotter()
+        self._workers.wait_all(30000)
+        self._hook("shutdown")
         if self._demo_tmp is not None:
             self._demo_tmp.cleanup()
             self._demo_tmp = None
@@ -382,7 +377,7 @@ class RegistrationWorkspace(QWidget):
         path = Path(path)
         if path.is_dir():
             raise InputError("is a folder, not a rig file: choose the rig's .json file", path)
-        _check_is_rig_file(path)
+        check_is_rig_file(path)
         rig = Rig.load(path)
         if self.session.plant is not None:
             # a plant of the data set has no rig of its own: the rig goes with a recording opened next
@@ -471,8 +466,7 @@ class RegistrationWorkspace(QWidget):
 
     def cancel(self) -> None:
         self.session.pending_target = None
-        for w in self._workers:
-            w.cancel()
+        self._workers.cancel_all()
 
     # ------------------------------------------------------------------ export
     def _ask_export(self) -> None:
@@ -481,24 +475,18 @@ class RegistrationWorkspace(QWidget):
         start = self.last_export or self.default_export_folder()
         dlg = ExportDialog(start, self)
         if dlg.exec():
-            self.export(dlg.out(), dlg.what())
+            self.export(dlg.out(), dlg.what(), drop_mixed=dlg.drop_mixed())
 
     def default_export_folder(self) -> Path:
-        """Beside the recording; for the demo, in the home folder: the demo lives in a temporary
-        folder that is deleted when the window closes, and an export in it would go with it."""
-        s = self.session
-        target = s.result.target if s.result is not None else "target"
-        rec = s.recording_path
-        if rec is None:
-            return Path.home()
-        if s.is_demo:
-            return Path.home() / f"plantreg-demo-registered-{target}"
-        return rec.parent / f"registered-{target}"
+        return self.session.default_export_folder()
 
-    def export(self, out: str | Path, what: list[str] | None = None, overwrite: bool = False) -> bool:
-        """Write the result with :func:`write_outputs` on a worker; asks before replacing a
-        non-empty folder. Returns False when nothing was started."""
-        from ...core.export import write_outputs
+    def export(self, out: str | Path, what: list[str] | None = None, overwrite: bool = False,
+               drop_mixed: bool = False) -> bool:
+        """Write the result with the pipeline's :func:`~plantreg_gui.core.pipeline.pipeline.export`
+        (as ``plantreg register`` does) on a worker; asks before replacing a non-empty folder.
+        ``drop_mixed``: NaN where a pixel is flagged mixed (the shown result is not changed).
+        Returns False when nothing was started."""
+        from ...core.pipeline.pipeline import OutputOptions, export
 
         s = self.session
         if s.result is None:
@@ -514,9 +502,10 @@ class RegistrationWorkspace(QWidget):
                 return False
             overwrite = True
         inputs = {"rig": str(s.rig_path)} if s.rig_path else None
-        w = Worker(write_outputs, s.result, s.rig, s.recording, out, overwrite=overwrite, inputs=inputs,
-                   what=what, display_options=s.export_display_options(),
-                   mosaic_tile=self.mosaic_view.tile.value())  # the export's mosaic is the screen's
+        options = OutputOptions(parts=None if what is None else tuple(what), drop_mixed=drop_mixed,
+                                display_options=s.export_display_options(),
+                                mosaic_tile=self.mosaic_view.tile.value())  # the export's mosaic is the screen's
+        w = Worker(export, s.result, s.rig, s.recording, out, options, overwrite=overwrite, inputs=inputs)
         self._start(w, f"Exporting to {out}", self._exported, kind="export")
         return True
 
@@ -527,18 +516,12 @@ class RegistrationWorkspace(QWidget):
 
     # ------------------------------------------------------------------ workers
     def _start(self, w: Worker, title: str, on_done: Callable[[Any], None], kind: str = "load") -> None:
-        self._workers.append(w)
-        w.progress.connect(lambda f, m, t=title: self._progress(t, f, m))
-        w.finished.connect(lambda out: self._guard(on_done, out, title="Cannot show the result"))
-        w.failed.connect(lambda msg, det, t=title: show_error(self, t + " failed", msg, det))
-        w.cancelled.connect(lambda t=title: self.readout.setText(f"{t}: cancelled."))
-        w.done.connect(lambda w=w: self._worker_done(w))
         self.progress.setValue(0)
         self._progress(title, 0.0, "")
         self.progress.show()
         self.cancel_button.show()
         self.register_button.setEnabled(False)
-        w.start()
+        self._workers.start(w, title, lambda out: self._guard(on_done, out, title="Cannot show the result"))
         self.session.job_started(id(w), kind, title)
 
     def _progress(self, title: str, fraction: float, message: str) -> None:
@@ -552,8 +535,6 @@ class RegistrationWorkspace(QWidget):
         self.progress.setFormat(msg.replace("%", "%%") + "  %p%")
 
     def _worker_done(self, w: Worker) -> None:
-        if w in self._workers:
-            self._workers.remove(w)
         w.deleteLater()
         s = self.session
         s.job_ended(id(w))
@@ -676,29 +657,25 @@ class RegistrationWorkspace(QWidget):
         e.acceptProposedAction()
 
     def open_path(self, path: str | Path) -> None:
-        """Open whatever a dropped path is: a rig file, a recording folder, a demo folder
-        (rig.json + recording/), or the Plant3DImageReg data set."""
+        """Open whatever a dropped path is (the session's :func:`kind_of_path` says what)."""
         p = Path(path)
-        if p.is_file() and p.suffix.lower() == ".json":
-            if p.name == MANIFEST:
-                self.open_recording(p.parent)
-            else:
-                self.open_rig(p)
-        elif p.is_dir() and plant3d.is_dataset(p):
+        kind = kind_of_path(p)
+        if kind == "rig":
+            self.open_rig(p)
+        elif kind == "manifest":
+            self.open_recording(p.parent)
+        elif kind == "dataset":
             self._ask_plant3d(p)
-        elif p.is_dir() and (p / MANIFEST).is_file():
+        elif kind == "recording":
             self.open_recording(p)
-        elif p.is_dir() and (p / "rig.json").is_file() and (p / "recording" / MANIFEST).is_file():
+        else:  # a demo folder: rig.json + recording/
             self.session.rig = None
             self.open_rig(p / "rig.json")
             self.open_recording(p / "recording")
-        else:
-            raise InputError("not a rig file, a recording folder or the Plant3DImageReg data set", p)
 
     # ------------------------------------------------------------------ interaction
     def _tab_changed(self, _i: int) -> None:
-        if self.tabs.currentWidget() is self.cloud_view:
-            self.cloud_view.show_staged()  # over several event-loop turns: no stall
+        self._hook("on_shown", self.tabs.currentWidget())
 
     # ------------------------------------------------------------------ save the view
     def _ask_save_view(self) -> None:
@@ -712,16 +689,15 @@ class RegistrationWorkspace(QWidget):
     def save_view_png(self, path: str | Path) -> Path:
         """Save the shown view as a PNG: a 2D view as drawn on screen (images, titles, colour bars),
         the 3D view as its rendered scene at the window's size. Returns the path."""
-        from ...core.imageio import write_png
+        from ...core.io.imageio import write_png
 
         path = Path(path)
         key = self.current_view()
         w = self.views[key]
-        if key == "3d":
-            self.cloud_view.render_now()
-            if self.cloud_view.plotter is None:
-                raise InputError("the 3D view has nothing to show yet; register first", path)
-            rgb = np.ascontiguousarray(np.asarray(self.cloud_view.plotter.screenshot(None, return_img=True))[..., :3])
+        if hasattr(w, "view_rgb"):
+            rgb = w.view_rgb()
+            if rgb is None:
+                raise InputError(f"the {key} view has nothing to show yet; register first", path)
         else:
             from .image_views import rgb8_from_qimage
 
@@ -750,7 +726,7 @@ class RegistrationWorkspace(QWidget):
         path = Path(p if p.lower().endswith(".csv") else p + ".csv")
 
         def write(text: str) -> None:
-            from ...core.imageio import atomic_write_text
+            from ...core.io.imageio import atomic_write_text
 
             try:
                 atomic_write_text(path, text)
@@ -766,5 +742,3 @@ class RegistrationWorkspace(QWidget):
         if mode is not None:
             self.set_view("side-by-side")
 
-    def _display_changed(self, name: str, settings: DisplaySettings) -> None:
-        self.session.set_display(name, settings)

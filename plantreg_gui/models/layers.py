@@ -1,0 +1,252 @@
+"""What the registration workspace shows, computed without Qt.
+
+The widgets only display what this module computes: display renderings of images (through
+:func:`plantreg_gui.core.display.display.to_rgb8`, the same rendering as the CLI previews), read-outs
+of every modality at a pixel in its units, and the multimodal point cloud as arrays. Keeping it
+Qt-free means it can be tested headless and used on a worker thread.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ..core.display import display
+from ..core.camera import modality as _mod
+from ..core.geometry.depth import to_millimetres
+
+DEPTH = "depth"  # pseudo-modality: z of the hit point (registered) or the raw depth map
+
+#: colour maps offered in the display controls (matplotlib names)
+COLORMAPS = ["gray", "viridis", "magma", "inferno", "RdBu_r", "coolwarm", "bwr", "jet", "turbo"]
+
+
+@dataclass
+class DisplaySettings:
+    """How one modality is drawn. ``cmap`` None = the modality's default (thermal RdBu_r,
+    infrared gray, depth viridis); ``bands`` None = PCA false colour for cubes. ``limits``
+    absolute (lo, hi) in the layer's unit (e.g. 18-26 °C), used instead of the ``percentiles``
+    when set; ``locked`` keeps them when another recording is opened (so colours compare
+    between recordings), otherwise a new recording goes back to the percentiles."""
+
+    cmap: str | None = None
+    percentiles: tuple[float, float] = (1.0, 99.0)
+    bands: tuple[int, int, int] | None = None
+    limits: tuple[float, float] | None = None
+    locked: bool = False
+
+    def with_(self, **kw: Any) -> "DisplaySettings":
+        return replace(self, **kw)
+
+
+def render(img: np.ndarray, modality: str, settings: DisplaySettings | None = None,
+           pca: display.PcaBasis | None = None) -> np.ndarray:
+    """Any image (H, W[, C]) -> (H, W, 3) uint8, as the core renders it for previews. ``pca``: the
+    false-colour basis of this camera's raw cube, so raw and registered cubes look alike."""
+    s = settings or DisplaySettings()
+    bands = s.bands
+    if bands is not None and (img.ndim != 3 or not _mod.is_cube_image(modality, img.shape[2])):
+        bands = None
+    limits = s.limits if s.limits is not None and pca is None else None  # PCA colours have no unit
+    return display.to_rgb8(img, modality=modality, cmap=s.cmap, limits=limits, percentiles=s.percentiles,
+                           bands=bands, pca=pca)
+
+
+def pca_basis(raw: np.ndarray, modality: str, settings: DisplaySettings | None = None) -> display.PcaBasis | None:
+    """The PCA false-colour basis of a raw cube (None for images that are not cubes)."""
+    if raw.ndim != 3 or not _mod.is_cube_image(modality, raw.shape[2]):
+        return None
+    if display.shows_as_rgb(raw.shape[2], modality):  # a 3-band cube is drawn as RGB, raw and registered
+        return None
+    return display.fit_pca(raw, None, (settings or DisplaySettings()).percentiles)
+
+
+def unit_of(modality: str) -> str:
+    return _mod.unit(modality)
+
+
+def format_value(v: float, modality: str) -> str:
+    if not np.isfinite(v):
+        return "—"
+    unit = _mod.unit(modality)
+    if unit == "°C":
+        return f"{v:.2f} °C"
+    if unit == "mm":
+        return f"{v:.1f} mm"
+    if abs(v) >= 1000 or float(v).is_integer():
+        return f"{v:.0f}"
+    return f"{v:.4g}"
+
+
+@dataclass
+class Layer:
+    """One displayable image: a camera's (raw or registered) image or the depth."""
+
+    name: str
+    modality: str
+    data: np.ndarray                          # (H, W) or (H, W, B)
+    wavelengths: np.ndarray | None = None     # (B,) nm, for cubes when known
+    unit: str = ""
+
+    @property
+    def bands(self) -> int:
+        return 1 if self.data.ndim == 2 else int(self.data.shape[2])
+
+    @property
+    def is_cube(self) -> bool:
+        """A spectral cube (the modality registry's one rule: ``modality.is_cube_image``)."""
+        return _mod.is_cube_image(self.modality, self.bands)
+
+    @property
+    def middle_band(self) -> int | None:
+        """The band a cube is read out at when none is chosen (None: not a cube)."""
+        return self.bands // 2 if self.is_cube else None
+
+    def percentile_limits(self, percentiles: tuple[float, float]) -> tuple[float, float]:
+        """``display.auto_limits`` of the data (all bands pooled), remembered per percentiles: the
+        colour bar and the start of absolute limits ask for the same numbers, and a large cube's
+        would be recomputed on the GUI thread each time. (The 2D rendering takes its own, in
+        ``display.to_rgb8``: for depth it first drops values <= 0.)"""
+        cache = self.__dict__.setdefault("_limits", {})
+        key = (id(self.data), float(percentiles[0]), float(percentiles[1]))
+        if key not in cache:
+            cache[key] = tuple(float(v) for v in display.auto_limits(self.data, percentiles))
+        return cache[key]
+
+    def value_text(self, row: int, col: int, band: int | None = None) -> str:
+        h, w = self.data.shape[:2]
+        if not (0 <= row < h and 0 <= col < w):
+            return "—"
+        px = self.data[row, col]
+        if self.data.ndim == 2:
+            return format_value(float(px), self.modality)
+        if display.shows_as_rgb(self.bands, self.modality):  # drawn as RGB (a 3-band cube too): its values
+            if not np.all(np.isfinite(px.astype(np.float64))):
+                return "—"
+            return "(" + ", ".join(format_value(float(v), self.modality) for v in px) + ")"
+        b = 0 if band is None else int(np.clip(band, 0, self.bands - 1))
+        v = float(px[b])
+        where = f"{self.wavelengths[b]:.0f} nm" if self.wavelengths is not None else f"band {b}"
+        return f"{format_value(v, self.modality)} @ {where} ({self.bands} bands)"
+
+    def spectrum(self, row: int, col: int) -> np.ndarray | None:
+        """(B,) values of a cube at a pixel, None for images with at most 3 bands."""
+        if self.data.ndim != 3 or self.bands <= 3:
+            return None
+        h, w = self.data.shape[:2]
+        if not (0 <= row < h and 0 <= col < w):
+            return None
+        return np.asarray(self.data[row, col], dtype=np.float64)
+
+
+def colour_bar_of(L: Layer, settings: DisplaySettings | None = None
+                  ) -> tuple[str | None, tuple[float, float] | None, str]:
+    """(colour map, (lo, hi) limits in the layer's unit, unit) of a single-band layer as :func:`render`
+    draws it with ``settings`` (default: the modality's colour map, 1-99 percentiles); (None, None, '')
+    for colour and multi-band images (no colour bar). What every view's ColourBar shows."""
+    if L.bands != 1:
+        return None, None, ""
+    st = settings or DisplaySettings()
+    lim = st.limits if st.limits is not None else L.percentile_limits(st.percentiles)
+    return st.cmap or _mod.default_cmap(L.modality), lim, L.unit
+
+
+def wavelengths_of(camera: Any, bands: int) -> np.ndarray | None:
+    """Band centres (nm) from a camera's extra rig keys (``wavelengths``/``wavelengths_nm``), if any."""
+    extra = getattr(camera, "extra", {}) or {}
+    for key in ("wavelengths_nm", "wavelengths", "bands_nm", "bands"):
+        w = extra.get(key)
+        if w is not None:
+            w = np.asarray(w, dtype=np.float64).ravel()
+            if w.size == bands:
+                return w
+    return None
+
+
+def registered_layers(result: Any, rig: Any) -> list[Layer]:
+    """The layers of a registration result in the target grid: every camera's registered
+    image (target first) and the depth (z of the hit point, mm)."""
+    layers = []
+    names = list(result.registered)
+    names.sort(key=lambda n: (n != result.target, rig.names.index(n) if n in rig.names else 99))
+    for name in names:
+        cam = rig.camera(name) if name in rig.names else None
+        data = result.registered[name]
+        mod = cam.modality if cam is not None else name
+        layers.append(Layer(name, mod, data, wavelengths_of(cam, data.shape[2]) if data.ndim == 3 else None,
+                            unit_of(mod)))
+    z_mm = np.asarray(result.points_rig[..., 2], dtype=np.float32) * np.float32(1000.0)
+    layers.append(Layer(DEPTH, DEPTH, z_mm, None, "mm"))
+    return layers
+
+
+def raw_layers(rig: Any | None, recording: Any) -> list[Layer]:
+    """The recording's raw images (depth first, in mm when the rig gives the scale)."""
+    layers = []
+    if recording.depth is not None:
+        scale = getattr(recording, "depth_scale", None) or (rig.depth_scale if rig is not None else 0.001)
+        d = to_millimetres(recording.depth, scale)
+        layers.append(Layer(DEPTH, DEPTH, d, None, "mm"))
+    for name, img in recording.images.items():
+        cam = None
+        if rig is not None and name in rig.names:
+            cam = rig.camera(name)
+        mod = cam.modality if cam is not None else _guess_modality(name, img)
+        wl = wavelengths_of(cam, img.shape[2]) if (cam is not None and img.ndim == 3) else None
+        layers.append(Layer(name, mod, img, wl, unit_of(mod)))
+    return layers
+
+
+def _guess_modality(name: str, img: np.ndarray) -> str:
+    return _mod.guess(name, 1 if img.ndim == 2 else img.shape[2])
+
+
+@dataclass
+class Cloud:
+    """The multimodal point cloud of a registration: ``points`` (N, 3) rig frame metres,
+    ``pixels`` (N,) flat target pixel index of each point, ``colours[name]`` (N, 3) uint8 (the
+    display rendering of every layer, so 2D and 3D look the same), ``values[name]`` (N,) or
+    (N, B) raw values for picking."""
+
+    points: np.ndarray
+    pixels: np.ndarray
+    colours: dict[str, np.ndarray] = field(default_factory=dict)
+    values: dict[str, np.ndarray] = field(default_factory=dict)
+    modalities: dict[str, str] = field(default_factory=dict)
+
+    def point_text(self, i: int) -> str:
+        p = self.points[i]
+        lines = [f"point {i}: x={p[0]*1000:.1f} y={p[1]*1000:.1f} z={p[2]*1000:.1f} mm (rig frame)"]
+        for name, v in self.values.items():
+            if v.ndim == 1:
+                lines.append(f"{name}: {format_value(float(v[i]), self.modalities.get(name, name))}")
+            elif v.shape[1] == 3:
+                lines.append(f"{name}: (" + ", ".join(f"{float(x):.4g}" for x in v[i]) + ")")
+            else:
+                lines.append(f"{name}: {v.shape[1]} bands, mean {float(np.nanmean(v[i])):.4g}")
+        return "\n".join(lines)
+
+
+def build_cloud(points_hw3: np.ndarray, layers: list[Layer], renders: dict[str, np.ndarray]) -> Cloud:
+    """Points with a finite position (from (H, W, 3)) and their per-layer colours/values."""
+    flat = points_hw3.reshape(-1, 3)
+    pix = np.flatnonzero(np.all(np.isfinite(flat), axis=1))
+    cloud = Cloud(np.ascontiguousarray(flat[pix], dtype=np.float32), pix)
+    for L in layers:
+        if L.data.shape[:2] != points_hw3.shape[:2]:
+            continue
+        v = L.data.reshape(L.data.shape[0] * L.data.shape[1], -1)[pix]
+        cloud.values[L.name] = v[:, 0] if v.shape[1] == 1 else v
+        cloud.modalities[L.name] = L.modality
+        if L.name in renders:
+            cloud.colours[L.name] = np.ascontiguousarray(renders[L.name].reshape(-1, 3)[pix])
+    return cloud
+
+
+def case_table(codes: np.ndarray, names: dict[int, str], colours: dict[int, Any]) -> list[tuple[int, str, Any, int, float]]:
+    """Legend rows ``(code, name, rgb or None, count, percent)`` for every named code."""
+    counts = np.bincount(np.asarray(codes, dtype=np.uint8).ravel(), minlength=256)
+    total = max(int(codes.size), 1)
+    return [(c, names[c], colours.get(c), int(counts[c]), 100.0 * counts[c] / total) for c in sorted(names)]

@@ -1,0 +1,119 @@
+"""Landmarks from two independent eye readings: ``annotations.json`` from ``eye_readings.json``.
+
+``eye_readings.json``: {"PLANT/CAMERA#i": {"note": ..., "r1": {"ir": [u, v], "other": [u, v]},
+"r2": {...}}} — two readings of the same silhouette feature (leaf tip, notch, corner, sinus) on
+fresh crops (different offsets and zoom, no marks; ``reclick.py``). A point is kept when the
+readings agree (<= 2 px infrared, <= 4 px in the other camera); the landmark is their mean, then
+moved inward onto the leaf (from 0 px) until the infrared pixel is valid, within 25 mm of the leaf 4 px further in, and its 3x3 neighbourhood (>= 7 valid) has
+consistent depth (a silhouette point itself is a flying pixel or a hole; up to 10 px), and the other camera's
+point is moved inward by the same physical distance (x 1.8 hyperspectral, x 2.2 thermal pixels per
+infrared pixel near the plants) along its own silhouette's inward normal. A reading's
+``"held_out"`` entry (why it is kept out of rig.json's fit) is carried over; build_landmarks.py
+writes those points to ``landmarks_heldout.json``.
+
+  python resources/plant3dimagereg/landmark_scripts/finalize.py
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from annotate_view import load
+from contour_points import plant_mask
+
+HERE = Path(__file__).resolve().parent
+SCALE = {"hyperspectral": 1.8, "thermal": 2.2}
+AGREE = {"ir": 2.0, "other": 4.0}
+
+
+def inward_normal(plant: str, cam: str, uv: np.ndarray, radius: float) -> np.ndarray:
+    """Unit vector from a silhouette point towards the centroid of the plant-mask pixels within
+    ``radius`` (along the leaf axis at a tip, into the leaf at a notch or an edge)."""
+    m = plant_mask(plant, cam)
+    v, u = np.nonzero(m[max(int(uv[1] - radius), 0):int(uv[1] + radius) + 1,
+                        max(int(uv[0] - radius), 0):int(uv[0] + radius) + 1])
+    u = u + max(int(uv[0] - radius), 0)
+    v = v + max(int(uv[1] - radius), 0)
+    keep = (u - uv[0]) ** 2 + (v - uv[1]) ** 2 <= radius ** 2
+    if not keep.any() and cam == "ir":
+        # a leaf tip in front of the tray's frame: the plant mask drops the frame's pixels and the
+        # tip with them; use the front surface instead (valid depth within 50 mm of the nearest)
+        d = load(plant, "depth").astype(np.float64)
+        r0, c0 = max(int(uv[1] - radius), 0), max(int(uv[0] - radius), 0)
+        win = d[r0:int(uv[1] + radius) + 1, c0:int(uv[0] + radius) + 1]
+        v, u = np.nonzero((win > 0) & (win < win[win > 0].min() + 50))
+        u, v = u + c0, v + r0
+        keep = (u - uv[0]) ** 2 + (v - uv[1]) ** 2 <= radius ** 2
+    c = np.array([u[keep].mean(), v[keep].mean()]) - uv
+    return c / max(np.linalg.norm(c), 1e-9)
+
+
+def main() -> None:
+    rd = json.loads((HERE / "eye_readings.json").read_text())
+    out: dict[str, list] = {}
+    dropped = []
+    depth_cache: dict[str, np.ndarray] = {}
+    for name, r in rd.items():
+        key, _ = name.split("#")
+        plant, cam = key.split("/")
+        a1, a2 = np.asarray(r["r1"]["ir"], float), np.asarray(r["r2"]["ir"], float)
+        b1, b2 = np.asarray(r["r1"]["other"], float), np.asarray(r["r2"]["other"], float)
+        if np.linalg.norm(a1 - a2) > AGREE["ir"] or np.linalg.norm(b1 - b2) > AGREE["other"]:
+            dropped.append((name, round(float(np.linalg.norm(a1 - a2)), 1), round(float(np.linalg.norm(b1 - b2)), 1)))
+            continue
+        pi, po = (a1 + a2) / 2, (b1 + b2) / 2
+        d = depth_cache.setdefault(plant, load(plant, "depth"))
+        ni = inward_normal(plant, "ir", pi, 8.0)
+        no = inward_normal(plant, cam, po, 8.0 * SCALE[cam])
+        step = None
+        for s in np.arange(0.0, 10.01, 0.5):
+            u, v = np.round(pi + ni * s).astype(int)
+            blk = d[v - 1:v + 2, u - 1:u + 2].astype(float)
+            ok = blk[blk > 0]
+            u2, v2 = np.round(pi + ni * (s + 4)).astype(int)  # the same leaf 4 px further in
+            inner = d[v2 - 1:v2 + 2, u2 - 1:u2 + 2].astype(float)
+            inner = inner[inner > 0]
+            if (blk.shape == (3, 3) and 0 < blk[1, 1] < 1130 and ok.size >= 7  # on the plant, not the tray
+                    and np.max(np.abs(ok - np.median(ok))) < 15 and abs(blk[1, 1] - np.median(ok)) < 8
+                    and inner.size and abs(blk[1, 1] - np.median(inner)) < 25):
+                step = float(s)
+                break
+        if step is None:
+            dropped.append((name, "no valid depth within 10 px"))
+            continue
+        out.setdefault(key, []).append({
+            "ir": np.round(pi + ni * step, 2).tolist(), "other": np.round(po + no * step * SCALE[cam], 2).tolist(),
+            "note": r["note"], "feature_ir": pi.round(2).tolist(), "feature_other": po.round(2).tolist(),
+            "inward_step_ir_px": step, **({"held_out": r["held_out"]} if "held_out" in r else {}),
+            "how": "mean of two eye readings of the silhouette feature (reclick.py crops), moved inward onto valid depth"})
+    (HERE / "annotations.json").write_text(json.dumps(out, indent=1) + "\n")
+    print({k: len(v) for k, v in out.items()}, "dropped:", dropped)
+
+
+
+
+def agreement() -> None:
+    """RMS difference between the two readings, per camera (all read points, and the kept ones)."""
+    rd = json.loads((HERE / "eye_readings.json").read_text())
+    for subset in ("all", "kept"):
+        diffs: dict[str, list[float]] = {}
+        for name, r in rd.items():
+            cam = name.split("#")[0].split("/")[1]
+            di = float(np.linalg.norm(np.subtract(r["r1"]["ir"], r["r2"]["ir"])))
+            do = float(np.linalg.norm(np.subtract(r["r1"]["other"], r["r2"]["other"])))
+            if subset == "kept" and (di > AGREE["ir"] or do > AGREE["other"]):
+                continue
+            diffs.setdefault("ir", []).append(di)
+            diffs.setdefault(cam, []).append(do)
+        for c, v in diffs.items():
+            v = np.asarray(v)
+            print(f"{subset:4s} {c:13s} n={len(v):2d} rms {np.sqrt(np.mean(v ** 2)):.2f} px  median {np.median(v):.2f}  max {v.max():.2f}")
+
+
+if __name__ == "__main__":
+    import sys
+
+    agreement() if sys.argv[1:] == ["--agreement"] else main()
