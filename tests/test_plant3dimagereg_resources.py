@@ -104,15 +104,74 @@ def test_heldout_landmarks_are_valid_and_were_kept_out_of_the_fit():
     assert json.loads((RES / "rig.json").read_text())["calibration"]["landmarks_used"] == fit.count()
 
 
+def _heldout_by_kind(rig: Rig) -> dict[str, list]:
+    """landmarks_heldout.json's points by ``"held_out_kind"``, as (recording, Landmark)."""
+    held = LandmarkSet.load(RES / "landmarks_heldout.json", rig)
+    out: dict[str, list] = {}
+    for k, pts in held.recordings.items():
+        for lm in pts:
+            out.setdefault(lm.extra.get("held_out_kind"), []).append((k, lm))
+    return out
+
+
+def test_heldout_pairs_say_how_they_were_found():
+    """README, "Session landmarks": 5 pairs located with rig.json's predictions in view (session
+    land12; no independent check) and 2 read on crops without any mark of a rig's prediction."""
+    kinds = _heldout_by_kind(Rig.load(RES / "rig_nominal.json"))
+    assert set(kinds) == {"found_with_rig", "independent"}
+    assert len(kinds["found_with_rig"]) == 5 and len(kinds["independent"]) == 2
+
+
+def test_the_independent_heldout_pairs_are_the_mean_of_two_readings_within_1_5_px():
+    """Ground truth for the independent pairs is the eye readings: two readings on different crops
+    and zooms, without a rig's prediction in view, agree within 1.5 px in each image, and the
+    held-out landmark is their mean (both points on valid depth as read: no inward move)."""
+    readings = json.loads((RES / "landmark_scripts" / "eye_readings.json").read_text())
+    indep = {k: r for k, r in readings.items() if r.get("held_out_kind") == "independent"}
+    assert len(indep) == 2
+    kinds = _heldout_by_kind(Rig.load(RES / "rig_nominal.json"))
+    for key, r in indep.items():
+        assert "without any mark of a rig's prediction" in r["held_out"]
+        for cam in ("ir", "other"):
+            assert np.linalg.norm(np.subtract(r["r1"][cam], r["r2"][cam])) <= 1.5, (key, cam)
+        plant, cam = key.split("#")[0].split("/")
+        match = [lm for k, lm in kinds["independent"] if k == f"recordings/{plant}" and lm.note == r["note"]]
+        assert len(match) == 1, key
+        assert np.allclose(match[0].depth_uv, np.mean([r["r1"]["ir"], r["r2"]["ir"]], axis=0), atol=0.01)
+        assert np.allclose(match[0].cameras[cam], np.mean([r["r1"]["other"], r["r2"]["other"]], axis=0), atol=0.01)
+
+
 @needs_data
-def test_the_fitted_rig_predicts_the_heldout_thermal_landmarks():
-    """An independent check of the shipped thermal pose on pairs it was not fitted to. Measured
-    (README, "Fit"): 1.3-5.8 px, median 3.6 px; the bounds leave ~1.5 px for reading noise."""
-    from plantreg_gui.core.rigfit.rigfit import evaluate_landmarks, load_recording_landmarks
+def test_the_fitted_rig_predicts_the_heldout_thermal_landmarks_found_with_its_help():
+    """The 5 held-out pairs of session land12: never fitted, but located with rig.json's predictions
+    in view, so they flatter it (README, "Session landmarks"). Measured: 1.3-5.8 px, median 3.6 px;
+    the bounds leave ~1.5 px for reading noise."""
+    from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, evaluate_landmarks, load_recording_landmarks
 
     rig = Rig.load(RES / "rig.json")
     recs = load_recording_landmarks(rig, LandmarkSet.load(RES / "landmarks_heldout.json", rig))
-    rows, rejected = evaluate_landmarks(rig, recs, ["thermal"])
+    recs = [RecordingLandmarks(r.name, r.depth_m, [lm for lm in r.points if lm.extra["held_out_kind"] == "found_with_rig"])
+            for r in recs]
+    rows, rejected = evaluate_landmarks(rig, [r for r in recs if r.points], ["thermal"])
     res = np.array([d["residual_px"] for d in rows])
-    assert not rejected and len(res) >= 5
+    assert not rejected and len(res) == 5
     assert np.median(res) < 5.0 and res.max() < 8.0
+
+
+@needs_data
+def test_the_fitted_rig_misses_the_independent_heldout_pairs_by_the_documented_figures():
+    """The 2 pairs read without a rig's prediction in view measure the shipped thermal pose where
+    it was not fitted, and they are large (README, "Session landmarks": 6.62 px grapevine top-leaf
+    notch, 14.21 px weeping fig curled leaf; issue 23's 4 px goal is not reached). The bounds guard
+    the documented figures with ~1.5 px for reading noise: a rig.json that did worse would make the
+    README's figures untrue."""
+    from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, evaluate_landmarks, load_recording_landmarks
+
+    rig = Rig.load(RES / "rig.json")
+    recs = load_recording_landmarks(rig, LandmarkSet.load(RES / "landmarks_heldout.json", rig))
+    recs = [RecordingLandmarks(r.name, r.depth_m, [lm for lm in r.points if lm.extra["held_out_kind"] == "independent"])
+            for r in recs]
+    rows, rejected = evaluate_landmarks(rig, [r for r in recs if r.points], ["thermal"])
+    res = {d["recording"].split("/")[-1]: d["residual_px"] for d in rows}
+    assert not rejected and set(res) == {"01grapevine", "06weeping_fig"}
+    assert res["01grapevine"] < 8.0 and res["06weeping_fig"] < 15.7

@@ -1,6 +1,8 @@
 """Build ``../landmarks.json`` (plantreg.landmarks v1) from ``annotations.json``, and
 ``../landmarks_heldout.json`` from the annotations marked ``"held_out"`` (read after ``rig.json``
-was fitted and kept out of its fit, to check it).
+was fitted and kept out of its fit, to check it); each held-out point keeps its ``"held_out_kind"``
+(``independent``: read without any mark of a rig's prediction, a real check; ``found_with_rig``:
+located with rig.json's predictions, so it flatters that rig; README, "Session landmarks").
 
 ``annotations.json``: {"PLANT/CAMERA": [{"ir": [u, v], "other": [u, v], "note": ..., "how": ...}, ...]}
 (the accepted pairs with how each was obtained). Each pair becomes one landmark point
@@ -31,7 +33,8 @@ def build(held_out: bool) -> tuple[dict, int]:
             pts = recs.setdefault(f"recordings/{plant}", {"points": []})["points"]
             pts.append({"depth_uv": [round(float(x), 2) for x in it["ir"]],
                         "cameras": {cam: [round(float(x), 2) for x in it["other"]]},
-                        "note": it.get("note", "")})
+                        "note": it.get("note", ""),
+                        **({"held_out_kind": it["held_out_kind"]} if held_out else {})})
     return {"format": "plantreg.landmarks", "version": 1, "recordings": recs}, \
         sum(len(r["points"]) for r in recs.values())
 
@@ -39,6 +42,10 @@ def build(held_out: bool) -> tuple[dict, int]:
 def main() -> None:
     for out, held in ((OUT, False), (HELD, True)):
         doc, n = build(held)
+        if held and not n:  # nothing held out: no file (a stale one would claim a check that is not there)
+            out.unlink(missing_ok=True)
+            print(f"{out}: no held-out points, not written")
+            continue
         out.write_text(json.dumps(doc, indent=1) + "\n")
         print(f"{out}: {n} points in {len(doc['recordings'])} recordings")
 

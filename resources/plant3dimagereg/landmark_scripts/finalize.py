@@ -8,8 +8,12 @@ moved inward onto the leaf (from 0 px) until the infrared pixel is valid, within
 consistent depth (a silhouette point itself is a flying pixel or a hole; up to 10 px), and the other camera's
 point is moved inward by the same physical distance (x 1.8 hyperspectral, x 2.2 thermal pixels per
 infrared pixel near the plants) along its own silhouette's inward normal. A reading's
-``"held_out"`` entry (why it is kept out of rig.json's fit) is carried over; build_landmarks.py
-writes those points to ``landmarks_heldout.json``.
+``"held_out"`` entry (why it is kept out of rig.json's fit) and ``"held_out_kind"`` (``independent``:
+read without any mark of a rig's prediction; ``found_with_rig``: located with rig.json's predictions)
+are carried over (build_landmarks.py writes those points to ``landmarks_heldout.json``), and so is
+``"session"`` (how a later session read it). The x 2.2 is a guess:
+the rig's local scale is 1.81-2.16 (1.85 near the image centre; ``step_variants.py scales``);
+the alternatives measured in session landmarks (README) were not better by the held-out measures.
 
   python resources/plant3dimagereg/landmark_scripts/finalize.py
 """
@@ -87,7 +91,7 @@ def main() -> None:
         out.setdefault(key, []).append({
             "ir": np.round(pi + ni * step, 2).tolist(), "other": np.round(po + no * step * SCALE[cam], 2).tolist(),
             "note": r["note"], "feature_ir": pi.round(2).tolist(), "feature_other": po.round(2).tolist(),
-            "inward_step_ir_px": step, **({"held_out": r["held_out"]} if "held_out" in r else {}),
+            "inward_step_ir_px": step, **{k: r[k] for k in ("held_out", "held_out_kind", "session") if k in r},
             "how": "mean of two eye readings of the silhouette feature (reclick.py crops), moved inward onto valid depth"})
     (HERE / "annotations.json").write_text(json.dumps(out, indent=1) + "\n")
     print({k: len(v) for k, v in out.items()}, "dropped:", dropped)

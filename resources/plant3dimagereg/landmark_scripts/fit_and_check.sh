@@ -1,9 +1,9 @@
 #!/bin/sh
 # Fit the rig from the landmarks and register every plant with it (run from the project root).
 #   sh resources/plant3dimagereg/landmark_scripts/fit_and_check.sh [FREE] [OUTDIR]
-# FREE: --free items for plantreg fit-rig (default: the depth camera's principal point and k1).
+# FREE: --free items for plantreg fit-rig (default: the depth camera's k1, as for the shipped rig.json).
 set -e
-FREE=${1:-ir:principal,ir:k1}
+FREE=${1:-ir:k1}
 OUT=${2:-/tmp/plant3dimagereg}
 R=resources/plant3dimagereg
 mkdir -p "$OUT"

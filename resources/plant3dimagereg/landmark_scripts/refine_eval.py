@@ -13,7 +13,8 @@ Run from this folder with ``PYTHONPATH=../../..``. Subcommands:
     that plant's landmarks measured (never used by the fit nor by the refinement).
 ``heldout CAM VARIANT MODE``
     From ``rig.json``: refine, then the residuals on ``landmarks_heldout.json`` (thermal: the 5
-    pairs ``rig.json`` never saw) and on ``landmarks.json`` (fitted, not independent).
+    pairs of session land12 ``rig.json`` never saw; ``thermal_eval.heldout_landmarks``: env
+    HELD_OUT_KIND=independent for the 2 of session landmarks) and on ``landmarks.json`` (fitted, not independent).
 
 VARIANT: comma-separated items
     ``nid`` (default objective), ``roi`` (only points inside the rig's ROI: the plant; no ground),
@@ -41,7 +42,7 @@ from plantreg_gui.core.data.recording import Recording
 from plantreg_gui.core.camera.rig import Rig
 from plantreg_gui.core.rigfit.rigfit import evaluate_landmarks
 
-from thermal_eval import RES, fit, load, only
+from thermal_eval import RES, fit, heldout_landmarks, load, only
 
 DATA = (RES / "../../../shared/data/plant3dimagereg").resolve()
 PLANTS = ["01grapevine", "02leopard_lily", "03areca_palm", "04philodendron", "05boston_fern", "06weeping_fig"]
@@ -146,7 +147,7 @@ def refine(rig: Rig, recs: list[Recording], cam: str, variant: set[str], extra_c
 def cmd_heldout(cam: str, variant: set[str], mode: str) -> None:
     rig = Rig.load(RES / "rig.json")
     lm_fit = load(RES / "landmarks.json", rig)
-    lm_out = load(RES / "landmarks_heldout.json", rig)
+    lm_out = heldout_landmarks(rig)
     print(f"start rig.json: fitted {fmt(judge(rig, lm_fit, cam))}\n   held-out {fmt(judge(rig, lm_out, cam))}")
     groups = [PLANTS] if mode == "joint" else [[p] for p in PLANTS]
     lmc = landmark_cost(rig, lm_fit, cam, variant)
@@ -189,7 +190,7 @@ def cmd_lopo(cam: str, variant: set[str], mode: str) -> None:
 
 def cmd_scan(cam: str, plant: str, variant: set[str], png: str | None) -> None:
     rig = Rig.load(RES / "rig.json")
-    lm = load(RES / "landmarks.json", rig) + (load(RES / "landmarks_heldout.json", rig) if cam == "thermal" else [])
+    lm = load(RES / "landmarks.json", rig) + (heldout_landmarks(rig) if cam == "thermal" else [])
     plants = PLANTS if plant == "all" else [plant]
     recs = recordings(rig, variant, plants)
     p = params(variant)
@@ -267,7 +268,7 @@ def cmd_field(cam: str, plant: str, variant: set[str], png: str, tile: int = 64,
     infrared values of the depth points projected there (rig.json) and the source image, against
     the landmarks' own correction (clicked - predicted). Plant points only with ``roi``."""
     rig = Rig.load(RES / "rig.json")
-    lm = [r for r in load(RES / "landmarks.json", rig) + load(RES / "landmarks_heldout.json", rig) if r.name.endswith(plant)]
+    lm = [r for r in load(RES / "landmarks.json", rig) + heldout_landmarks(rig) if r.name.endswith(plant)]
     if len(lm) > 1:  # fitted and held-out points of the plant in one entry
         lm = [type(lm[0])(lm[0].name, lm[0].depth_m, [x for r in lm for x in r.points])]
     rec = recordings(rig, variant, [plant])[0]

@@ -1,14 +1,15 @@
 """Held-out figures for the thermal landmarks (issue 8, session land12).
 
 ``heldout RIG [LANDMARKS]``: residuals of a rig on landmarks, no fitting (default: ``rig.json`` is
-given as RIG by the user, LANDMARKS = ``landmarks_heldout.json``, the points read after rig.json
-was fitted — a true held-out test of it).
+given as RIG by the user, LANDMARKS = ``landmarks_heldout.json``, all 7 points kept out of rig.json's
+fit: 5 located with its predictions (session land12), 2 read without them (session landmarks) —
+``refit_eval.py check`` splits them by kind).
 
-``compare [WAY ...]``: on all 31 landmarks (``landmarks.json`` + ``landmarks_heldout.json``; env
-LANDMARKS=FILE for one file), for each way of fitting, the fitted residuals and two held-out measures
-per camera — leave-one-plant-out (LOPO: the plant's landmarks of every camera left out of the fit)
-and, for the thermal camera, leave-one-landmark-out (LOLO: one thermal landmark left out at a
-time, everything else in). Ways of fitting:
+``compare [WAY ...]``: on all 31 landmarks (``landmarks.json`` + the 5 land12 pairs of
+``landmarks_heldout.json``, see ``heldout_landmarks``; env LANDMARKS=FILE for one file), for each
+way of fitting, the fitted residuals and two held-out measures per camera — leave-one-plant-out
+(LOPO: the plant's landmarks of every camera left out of the fit) and, for the thermal camera,
+leave-one-landmark-out (LOLO: one thermal landmark left out at a time, everything else in). Ways of fitting:
 
 * ``joint FREE``: one ``plantreg fit-rig --free FREE`` over all landmarks (what
   ``fit_and_check.sh`` does with ``landmarks.json``);
@@ -39,23 +40,35 @@ HERE = Path(__file__).resolve().parent
 RES = HERE.parent
 
 
-def load(path: Path, rig: Rig) -> list[RecordingLandmarks]:
+def load(path: Path, rig: Rig, kind: str | None = None) -> list[RecordingLandmarks]:
+    """The landmarks of ``path``; ``kind``: only the points with that ``"held_out_kind"``."""
     doc = json.loads(path.read_text())
     out = []
     for key, r in sorted(doc["recordings"].items()):
         lms = [Landmark(np.array(p["depth_uv"], float), {c: np.array(uv, float) for c, uv in p["cameras"].items()},
-                        p.get("note", "")) for p in r["points"]]
+                        p.get("note", "")) for p in r["points"] if kind is None or p.get("held_out_kind") == kind]
+        if not lms:
+            continue
         out.append(RecordingLandmarks(key, Recording.load(path.parent / key).depth_m(rig.depth_scale), lms))
     return out
 
 
+def heldout_landmarks(rig: Rig) -> list[RecordingLandmarks]:
+    """The pairs of ``landmarks_heldout.json`` these sessions' figures are of: by default the 5 of
+    session land12 (``"held_out_kind": "found_with_rig"``); env HELD_OUT_KIND=independent for the 2
+    read without a rig's prediction (session landmarks), HELD_OUT_KIND=all for all 7."""
+    kind = os.environ.get("HELD_OUT_KIND", "found_with_rig")
+    return load(RES / "landmarks_heldout.json", rig, None if kind == "all" else kind)
+
+
 def all_landmarks(rig: Rig) -> list[RecordingLandmarks]:
-    """``landmarks.json`` and ``landmarks_heldout.json`` together (31 points; LANDMARKS=FILE: that
-    file alone), one entry per recording, the held-out points after the fitted ones."""
+    """``landmarks.json`` and the held-out pairs of ``heldout_landmarks`` together (31 points by
+    default; LANDMARKS=FILE: that file alone), one entry per recording, the held-out points after
+    the fitted ones."""
     if os.environ.get("LANDMARKS"):
         return load(Path(os.environ["LANDMARKS"]), rig)
     recs = {r.name: r for r in load(RES / "landmarks.json", rig)}
-    for r in load(RES / "landmarks_heldout.json", rig):
+    for r in heldout_landmarks(rig):
         if r.name in recs:
             recs[r.name].points.extend(r.points)
         else:
