@@ -103,7 +103,7 @@ def main() -> None:
         poses = None
         if a.poses:
             poses = sorted(f.name.split("-")[0] for f in (realcal / "herrera_kinect_rgb" / "c1_kinect_rgb").glob("*-c1.jpg"))[:a.poses]
-        session = herrera_session(realcal, tmp / "herrera", poses)
+        session = herrera_session(a.data, tmp / "herrera", poses)
         n_img = sum(1 for p in session.iterdir() if p.is_dir() for _ in p.iterdir())
         out = tmp / "out"
         out.mkdir()

@@ -2,6 +2,8 @@
 # Set up plantreg on a fresh Debian/Ubuntu-like machine and run one job:
 #   bash packaging/setup.sh demo   -> install, write the built-in demo to ./demo and register it (./demo/out)
 #   bash packaging/setup.sh test   -> install with test tools, run the whole test suite
+#   bash packaging/setup.sh bundle -> install with PyInstaller, build the one-folder app dist/plantreg/ and
+#                                     smoke-test it (packaging/bundle.sh, packaging/smoke-bundle.sh)
 #   bash packaging/setup.sh        -> install only
 # Creates a virtual environment at .venv in the project root with `plantreg` and `plantreg-gui`.
 set -euo pipefail
@@ -15,6 +17,8 @@ fi
 .venv/bin/python -m pip install -q --upgrade pip
 if [ "$job" = "test" ]; then
   .venv/bin/python -m pip install -q -e ".[test]"
+elif [ "$job" = "bundle" ]; then
+  .venv/bin/python -m pip install -q -e ".[bundle]"
 else
   .venv/bin/python -m pip install -q -e .
 fi
@@ -30,5 +34,6 @@ case "$job" in
     shift || true
     .venv/bin/python -m pytest "$@"
     ;;
-  *) echo "usage: bash packaging/setup.sh [install|demo|test]" >&2; exit 2 ;;
+  bundle) bash packaging/bundle.sh ;;
+  *) echo "usage: bash packaging/setup.sh [install|demo|test|bundle]" >&2; exit 2 ;;
 esac

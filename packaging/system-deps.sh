@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# System libraries that Open3D and Qt need (and Xvfb + Mesa for headless GUI tests).
+# System libraries that Open3D and Qt need (and Xvfb + Mesa for headless GUI tests,
+# desktop-file-validate for the desktop entry's test).
 # As root it installs them with apt-get; otherwise it prints the exact command to run.
 set -euo pipefail
 PKGS=(
@@ -10,6 +11,7 @@ PKGS=(
   libxcb-randr0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xkb1 libxcb-xfixes0
   libx11-xcb1 libxrender1 libxi6 libxt6 libsm6 libice6
   xvfb xauth
+  desktop-file-utils
 )
 missing=()
 for p in "${PKGS[@]}"; do

@@ -1,6 +1,6 @@
-"""Calibration sessions laid out over the real sets in ``../shared/data/realcal`` (which stay
-read-only): one folder per pose with symlinks named after the cameras, and a ``session.json``
-from the sets' READMEs. Used by tests and ``benchmarks/bench_calibrate.py``."""
+"""Sessions built (as symlinks, in a temporary folder) from the real sets in ``shared/data/realcal``,
+which are laid out as the publishers left them, not as plantreg sessions. Never writes into
+``shared/``."""
 
 from __future__ import annotations
 
@@ -8,48 +8,58 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
+
 
 def _link(src: Path, dst: Path) -> None:
-    try:
-        os.symlink(src, dst)
-    except OSError:  # no symlinks (some file systems): a copy
-        import shutil
-
-        shutil.copy(src, dst)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    os.symlink(src.resolve(), dst)
 
 
-def _layout(dst: Path, poses: dict[str, dict[str, Path]], meta: dict) -> Path:
-    """``dst/POSE/CAMERA.ext`` -> the files of ``poses`` {pose: {camera: file}}, and session.json."""
-    dst.mkdir(parents=True, exist_ok=True)
-    for pose, files in poses.items():
-        (dst / pose).mkdir(exist_ok=True)
-        for cam, f in files.items():
-            if f.exists():
-                _link(f, dst / pose / f"{cam}{f.suffix}")
-    (dst / "session.json").write_text(json.dumps(meta, indent=2))
+def herrera_session(shared: Path, dst: Path, views: list[str] | None = None) -> Path:
+    """Herrera et al.'s Kinect RGB ('kinect', 1280 x 1024) + external RGB ('external',
+    2784 x 1856), 8 x 6 board of 40 mm squares; one pose folder per view number (``views``:
+    e.g. ["0000", "0003"]; default all 54 Kinect views, 38 of them with the external camera)."""
+    src = shared / "realcal" / "herrera_kinect_rgb"
+    dst.mkdir(parents=True)
+    for f in sorted((src / "c1_kinect_rgb").glob("*-c1.jpg")):
+        n = f.name.split("-")[0]
+        if views is not None and n not in views:
+            continue
+        _link(f, dst / f"view_{n}" / "kinect.jpg")
+        ext = src / "c2_external_rgb" / f"{n}-c2.jpg"
+        if ext.is_file():
+            _link(ext, dst / f"view_{n}" / "external.jpg")
+    (dst / "session.json").write_text(json.dumps({
+        "board": {"type": "chessboard", "columns": 8, "rows": 6, "square_size": 0.04},
+        "cameras": {"kinect": {"modality": "visible"}, "external": {"modality": "visible"}}}))
     return dst
 
 
-def herrera_session(realcal: Path, dst: Path, poses: list[str] | None = None) -> Path:
-    """Herrera et al.'s set: cameras ``kinect`` (Kinect RGB 1280 x 1024) and ``external``
-    (2784 x 1856), 8 x 6 inner corners, 40 mm squares; pose ``NNNN`` holds the images of that
-    number. ``poses`` (e.g. ["0000", "0003"]) restricts the session to some poses."""
-    src = Path(realcal) / "herrera_kinect_rgb"
-    nums = [f.name.split("-")[0] for f in sorted((src / "c1_kinect_rgb").glob("*-c1.jpg"))]
-    files = {n: {"kinect": src / "c1_kinect_rgb" / f"{n}-c1.jpg", "external": src / "c2_external_rgb" / f"{n}-c2.jpg"}
-             for n in nums if poses is None or n in poses}
-    meta = {"board": {"type": "chessboard", "columns": 8, "rows": 6, "square_size": 0.040},
-            "cameras": {"kinect": {"modality": "visible"}, "external": {"modality": "visible"}}}
-    return _layout(dst, files, meta)
+def herrera_reference(shared: Path) -> dict:
+    """The published calibration: K of both cameras, and the external camera's pose in the
+    Kinect's frame as (R_ext_kinect (3, 3), t_ext_kinect (3,) metres) (from Herrera's
+    X_kinect = rR X_ext + rt)."""
+    d = json.loads((shared / "realcal" / "herrera_kinect_rgb" / "reference" / "final_calib_full_set.json").read_text())
+    c2 = d["cam2_external_rgb"]
+    rR, rt = np.array(c2["rR_herrera"]), np.array(c2["rt_herrera_m"])
+    return {"K_kinect": np.array(d["cam1_kinect_rgb"]["K"]), "K_external": np.array(c2["K"]),
+            "R_ext_kinect": rR.T, "t_ext_kinect": -rR.T @ rt}
 
 
-def lepton_session(realcal: Path, dst: Path, stamps: list[str] | None = None) -> Path:
-    """The Lepton 3.5 + ZED 2i set: cameras ``thermal`` (120 x 160 pseudo-colour PNG) and
-    ``rgb`` (ZED left 1280 x 720), 4 x 6 inner corners, 55 mm squares; pose = time stamp."""
-    src = Path(realcal) / "lepton35_zed2i"
-    found = [f.stem[len("thermal_"):] for f in sorted((src / "thermal").glob("thermal_*.png"))]
-    files = {t: {"thermal": src / "thermal" / f"thermal_{t}.png", "rgb": src / "zed" / f"zed_{t}.jpg"}
-             for t in found if stamps is None or t in stamps}
-    meta = {"board": {"type": "chessboard", "columns": 4, "rows": 6, "square_size": 0.055},
-            "cameras": {"thermal": {"modality": "thermal"}, "rgb": {"modality": "visible"}}}
-    return _layout(dst, files, meta)
+def lepton_session(shared: Path, dst: Path, stamps: list[str] | None = None) -> Path:
+    """FLIR Lepton 3.5 ('thermal', 120 x 160 palette PNG) + ZED 2i left ('rgb', 1280 x 720):
+    one pose folder per time stamp present in both; 4 x 6 board of 55 mm squares."""
+    src = shared / "realcal" / "lepton35_zed2i"
+    dst.mkdir(parents=True)
+    for f in sorted((src / "thermal").glob("thermal_*.png")):
+        stamp = f.stem[len("thermal_"):]
+        z = src / "zed" / f"zed_{stamp}.jpg"
+        if not z.is_file() or (stamps is not None and stamp not in stamps):
+            continue
+        _link(f, dst / f"t_{stamp}" / "thermal.png")
+        _link(z, dst / f"t_{stamp}" / "rgb.jpg")
+    (dst / "session.json").write_text(json.dumps({
+        "board": {"type": "chessboard", "columns": 4, "rows": 6, "square_size": 0.055},
+        "cameras": {"rgb": {"modality": "visible"}, "thermal": {"modality": "thermal"}}}))
+    return dst

@@ -33,8 +33,8 @@ def test_stereo_set_through_the_cli(stereo_run):
     left, right = rig.camera("left"), rig.camera("right")
     assert left.K[0, 0] == pytest.approx(535.9, rel=0.01)
     assert np.allclose(left.R_cam_rig, np.eye(3)) and np.allclose(left.t_cam_rig, 0)
-    # the two cameras sit side by side, ~8 cm apart (the sample's board has 25 mm squares)
-    assert 0.07 < np.linalg.norm(right.center_rig) < 0.10 and abs(right.center_rig[0]) > 0.07
+    # the two cameras sit side by side, ~99.8 mm apart (Bouguet's result; the board has 30 mm squares)
+    assert 0.097 < np.linalg.norm(right.center_rig) < 0.102 and abs(right.center_rig[0]) > 0.097
     prov = rig.extra["calibration"]
     assert prov["app"] == "plantreg" and prov["version"] and prov["date"]
     assert prov["session"].endswith("opencv-stereo") and prov["board"]["columns"] == 9
@@ -51,6 +51,86 @@ def test_stereo_set_through_the_cli(stereo_run):
         assert (out / f"report_{name}.csv").is_file()
     rows = (out / "report_extrinsic_px.csv").read_text().splitlines()
     assert rows[0] == "origin \\ target,left,right" and rows[1].startswith("left,,")
+
+
+def test_stereo_pose_matches_bouguet_and_reports_its_uncertainty(stereo_run, shared_data):
+    """Bouguet's published stereo-optimised pose of these images (reference_bouguet.json): within
+    0.6 mm and 0.05 degrees; and our own reported uncertainty of that pose says how well it is
+    known (published 1-sigma: 0.15 deg, 0.14-0.5 mm)."""
+    _code, out = stereo_run
+    ref = json.loads((shared_data / "opencv-stereo" / "reference_bouguet.json").read_text())["stereo_optimised_rounded"]
+    R_ref = cv2.Rodrigues(np.array(ref["om_right_from_left_rodrigues"]))[0]
+    T_ref = np.array(ref["T_right_from_left_mm"]) / 1000
+    right = Rig.load(out / "rig.json").camera("right")
+    ang = np.degrees(np.arccos(np.clip((np.trace(right.R_cam_rig @ R_ref.T) - 1) / 2, -1, 1)))
+    assert ang < 0.05 and np.linalg.norm(right.t_cam_rig - T_ref) < 0.0006
+    report = json.loads((out / "report.json").read_text())
+    u = report["uncertainty"]["right"]
+    assert 0 < u["rotation_sigma_deg"] < 0.25 and 0 < u["translation_sigma_mm"] < 2
+    assert u["std"]["fx"] > 0 and u["values"]["fx"] == pytest.approx(right.K[0, 0])
+    assert len(u["grid"]["sigma_px"]) >= 4 and u["add_views_here"]
+    assert report["uncertainty"]["left"]["lens_model"]["cv_rms_px"]["k1k2"] > 0
+    rows = (out / "report_uncertainty.csv").read_text().splitlines()
+    assert rows[0] == "camera,parameter,value,std,unit" and any(r.startswith("right,rotation_deg,") for r in rows)
+    prov = Rig.load(out / "rig.json").extra["calibration"]
+    assert prov["cameras"]["right"]["uncertainty"]["translation_sigma_mm"] == pytest.approx(u["translation_sigma_mm"])
+    assert "accepted_uncertain" not in prov
+
+
+def test_known_intrinsics_from_a_rig_file(stereo_run, shared_data, tmp_path, capsys):
+    """--intrinsics CAM=RIG.json: the left camera's K and distortion from the full-set rig (with
+    its standard errors: priors) on a 4-pose subset; checked before any detection."""
+    _code, out = stereo_run
+    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04", "pose_05"])
+    full = Rig.load(out / "rig.json")
+    code = main(["calibrate", str(s), "--out", str(tmp_path / "r.json"), "--report", str(tmp_path / "rep.json"),
+                 "--intrinsics", f"left={out / 'rig.json'}", "--quiet"])
+    assert code == 0
+    rig = Rig.load(tmp_path / "r.json")
+    sd = full.extra["calibration"]["cameras"]["left"]["uncertainty"]["std"]
+    assert abs(rig.camera("left").K[0, 0] - full.camera("left").K[0, 0]) < 3 * sd["fx"]
+    assert rig.extra["calibration"]["cameras"]["left"]["lens_model"]["model"] == "given"
+    # the same from session.json ("intrinsics" in the camera's entry), kept when the session is saved
+    from plantreg_gui.core.calibration import Session
+
+    meta = json.loads((s / "session.json").read_text())
+    meta["cameras"]["left"]["intrinsics"] = str(out / "rig.json")
+    (s / "session.json").write_text(json.dumps(meta))
+    Session.load(s).save()
+    assert json.loads((s / "session.json").read_text())["cameras"]["left"]["intrinsics"] == str(out / "rig.json")
+    code = main(["calibrate", str(s), "--out", str(tmp_path / "r2.json"), "--report", str(tmp_path / "rep2.json"),
+                 "--quiet"])
+    assert code == 0
+    prov = Rig.load(tmp_path / "r2.json").extra["calibration"]["cameras"]["left"]
+    assert prov["lens_model"]["model"] == "given" and prov["lens_model"]["source"] == str(out / "rig.json")
+    assert "intrinsics" not in Rig.load(tmp_path / "r2.json").camera("left").extra
+    # a camera the session does not have; a rig for another image size: one line, exit 1
+    err = _run_fails_args(s, tmp_path, capsys, ["--intrinsics", f"thermal={out / 'rig.json'}"])
+    assert "no camera 'thermal'" in err
+    d = json.loads((out / "rig.json").read_text())
+    for c in d["cameras"]:
+        c["width"], c["height"] = 1280, 960
+    (tmp_path / "big.json").write_text(json.dumps(d))
+    err = _run_fails_args(s, tmp_path, capsys, ["--intrinsics", f"left={tmp_path / 'big.json'}"])
+    assert "1280x960" in err and "640x480" in err and "camera 'left'" in err
+
+
+def test_too_few_views_are_refused_as_uncertain_unless_accepted(shared_data, tmp_path, capsys):
+    """Three pairs: every error figure looks fine, but three views cannot check a lens model (and
+    on this set leave the left focal length 5 sigma off the full set's): refused, naming the
+    cameras and what is missing; --accept-uncertain writes it, flagged in the rig and the report."""
+    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04"])
+    err = _run_fails(s, tmp_path, capsys)
+    assert "calibration too uncertain, nothing written" in err and "--accept-uncertain" in err
+    assert "camera 'left': only 3 views, too few to check its lens model" in err
+    out = tmp_path / "accepted"
+    code = main(["calibrate", str(s), "--out", str(out / "rig.json"), "--report", str(out / "r.json"), "--quiet",
+                 "--accept-uncertain"])
+    err = capsys.readouterr().err
+    assert code == 0 and "kept with --accept-uncertain: camera 'left': only 3 views" in err
+    flagged = Rig.load(out / "rig.json").extra["calibration"]["accepted_uncertain"]
+    assert any(f.startswith("camera 'right': only 3 views") for f in flagged)
+    assert json.loads((out / "r.json").read_text())["accepted_uncertain"] == flagged
 
 
 def test_classic_detector_flags_pair_02(shared_data, tmp_path):
@@ -169,7 +249,7 @@ def test_failed_rig_write_leaves_no_report_and_no_traceback(shared_data, tmp_pat
     the report/CSVs already written are removed (a report without its rig must not look complete)."""
     import errno
 
-    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04"])
+    s = _subset(shared_data, tmp_path, ["pose_01", "pose_03", "pose_04", "pose_05"])
     out = tmp_path / "out"
     out.mkdir()
 

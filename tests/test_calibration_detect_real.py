@@ -246,7 +246,7 @@ def test_lepton_thermal_views_found_without_options(shared_data, tmp_path):
     found corners is below 0.3 px (the old luma detection at native size: 0.34 px)."""
     from realcal import lepton_session
 
-    s = Session.load(lepton_session(shared_data / "realcal", tmp_path / "lepton"))
+    s = Session.load(lepton_session(shared_data, tmp_path / "lepton"))
     dets = [d for d in detect_session(s, views=[(p.name, "thermal") for p in s.poses])]
     found = [d for d in dets if d.found]
     assert len(dets) == 69 and len(found) >= 66
@@ -263,7 +263,7 @@ def test_herrera_views_opencv_finds_are_found(shared_data, tmp_path):
     from realcal import herrera_session
 
     poses = [f"{i:04d}" for i in range(0, 38, 5)]
-    s = Session.load(herrera_session(shared_data / "realcal", tmp_path / "herrera", poses))
+    s = Session.load(herrera_session(shared_data, tmp_path / "herrera", poses))
     dets = {d.key: d for d in detect_session(s)}
     n_cv = 0
     for (pose, cam), d in dets.items():

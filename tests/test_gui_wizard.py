@@ -287,6 +287,28 @@ def test_opencv_stereo_to_saved_rig_tallest_bar_is_engine_worst_view(qtbot, shar
         rig = Rig.load(out)
         assert abs(rig.camera("left").K[0, 0] - 535.9) < 535.9 * 0.02
         assert rig.depth_camera is None
+        assert rig.extra["calibration"]["cameras"]["right"]["uncertainty"]["rotation_sigma_deg"] > 0
+        assert "accepted_uncertain" not in rig.extra["calibration"]
+        # a calibration beyond the uncertainty limits is saved only on explicit confirmation, flagged
+        from plantreg_gui.gui.calibration import save_page
+
+        problem = "camera 'right': rotation relative to the reference uncertain by +- 1 deg (test)"
+        monkeypatch.setattr(save_page.results, "uncertainty_problems", lambda cal: [problem])
+        pick = ["Don't save"]
+
+        def answer(box):
+            next(b for b in box.buttons() if b.text() == pick[0]).click()
+            return 0
+
+        monkeypatch.setattr(QMessageBox, "exec", answer)
+        out2 = tmp_path / "uncertain.rig.json"
+        w.pages[6].rig_path.setText(str(out2))
+        w.pages[6].save()
+        assert not out2.exists() and not w.is_busy() and "too uncertain" in w.pages[6].message.text()
+        pick[0] = "Save anyway (flagged as uncertain)"
+        with qtbot.waitSignal(w.saved, timeout=60000):
+            w.pages[6].save()
+        assert Rig.load(out2).extra["calibration"]["accepted_uncertain"] == [problem]
     finally:
         _close(w)
 

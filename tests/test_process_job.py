@@ -41,3 +41,30 @@ def test_result_progress_errors_and_cancel():
     with pytest.raises(Cancelled):
         run_in_process(_forever, progress=rep)
     assert run_in_process(_square, 3) == 9  # the process serves the next job
+
+
+def test_the_worker_pool_is_shut_down_before_the_interpreter_tears_down():
+    """Left in the module until the interpreter's teardown, the pool's manager-thread weakref
+    callback ran after multiprocessing was gone: "Exception ignored in ... weakref_cb ...
+    AttributeError" at the exit of a desktop app that had run the wizard (defect 13 of issue 21;
+    seen in the frozen bundle). The pool must be gone by the time the exit handlers registered
+    before it have run (they run last)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import atexit, sys\n"
+            "from plantreg_gui.core.jobs import process_job\n"
+            "atexit.register(lambda: print('pool at teardown:', 'pool' in process_job._state, flush=True))\n"
+            "if __name__ == '__main__':\n"
+            "    from plantreg_gui.core.jobs.process_job import run_in_process\n"
+            "    import test_process_job as t\n"
+            "    print('result', run_in_process(t._square, 7), flush=True)\n")
+    here = Path(__file__).resolve().parent
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(here.parent), str(here)])}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr
+    assert "result 49" in r.stdout
+    assert "pool at teardown: False" in r.stdout, r.stdout
+    assert "Exception ignored" not in r.stderr, r.stderr

@@ -2,7 +2,8 @@
 
     plantreg calibrate SESSION --out RIG --report REPORT
                        [--roi XMIN YMIN ZMIN XMAX YMAX ZMAX] [--exclude POSE:CAM ...]
-                       [--detector auto|classic] [--max-rms PX] [--overwrite] [--quiet]
+                       [--detector auto|classic] [--max-rms PX] [--intrinsics CAM=RIG.json ...]
+                       [--accept-uncertain] [--overwrite] [--quiet]
 
 Detects the board in every image, calibrates every camera and the rig jointly, computes the
 paper's three error tables and writes the rig file (with provenance under ``"calibration"``),
@@ -11,7 +12,11 @@ stderr, a summary on stdout. Session format and tables: ``docs/calibration.md``.
 
 The rig, the report and its CSVs are written as one transaction (all or nothing; the previous
 set survives any failure); existing files are replaced only with ``--overwrite``. A calibration
-that clearly failed (RMS error above ``--max-rms``, default 2 px) writes nothing and exits 1.
+that clearly failed (RMS error above ``--max-rms``, default 2 px) writes nothing and exits 1. So
+does one the data do not determine well enough (a camera's projection uncertainty, or a camera's
+pose uncertainty relative to the reference, beyond the limits of
+:mod:`plantreg_gui.core.calibration.uncertainty`), naming the camera and the parameter, unless
+``--accept-uncertain`` (then the rig and the report carry the flag).
 """
 
 from __future__ import annotations
@@ -51,6 +56,13 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--max-rms", type=positive_float, default=None, metavar="PX",
                    help="largest RMS reprojection error (px; joint and per camera) a successful calibration may "
                         "have (default 2); above it nothing is written and the exit status is 1")
+    p.add_argument("--intrinsics", nargs="+", default=[], metavar="CAM=RIG.json",
+                   help="hold camera CAM's intrinsics (K and distortion) at those of the rig file RIG.json (the "
+                        "camera of that name, or its only camera) and estimate only the poses; with standard errors "
+                        "in the file (a plantreg calibration) they are priors instead of fixed")
+    p.add_argument("--accept-uncertain", action="store_true",
+                   help="write the rig even when a camera's projection uncertainty or pose uncertainty exceeds the "
+                        "documented limits (docs/calibration.md); the rig and the report then carry the flag")
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing rig file, report and CSV tables (replaced together, only when the new "
                         "set is complete)")
@@ -77,6 +89,23 @@ def _parse_excludes(items: list[str], session) -> set[tuple[str, str]]:
     return out
 
 
+def _parse_intrinsics(items: list[str], session) -> dict:
+    """``CAM=RIG.json`` items -> camera -> KnownIntrinsics, checked against the session (camera
+    exists, image size matches) before any detection."""
+    from ..core.calibration.calibrate import check_known_intrinsics, load_known_intrinsics, session_known_intrinsics
+
+    known = session_known_intrinsics(session)
+    for it in items:
+        cam, sep, path = str(it).partition("=")
+        if not sep or not cam or not path:
+            raise InputError(f"--intrinsics '{it}': expected CAM=RIG.json, e.g. thermal=thermal_rig.json")
+        if cam not in session.cameras:
+            raise InputError(f"--intrinsics '{it}': no camera '{cam}' in the session ({', '.join(session.cameras)})")
+        known[cam] = load_known_intrinsics(path, cam)
+    check_known_intrinsics(session, known)
+    return known
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import cli
     from ..core.calibration import Session
@@ -88,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
 
     session = Session.load(args.session)
     excluded = session.excluded() | _parse_excludes(args.exclude, session)
+    known = _parse_intrinsics(getattr(args, "intrinsics", []), session)
     roi = None
     if args.roi is not None:
         lo, hi = np.array(args.roi[:3]), np.array(args.roi[3:])
@@ -122,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
                 o = stored.get((pose.name, cam), DetectOptions())
                 options[(pose.name, cam)] = DetectOptions(o.invert, o.enhance, args.detector)
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
-    detections, cal, report = run_session(session, excluded, options, roi, progress)
+    detections, cal, report = run_session(session, excluded, options, roi, progress, known=known)
     _print_summary(session, detections, cal, report)
     for w in report.warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -132,6 +162,16 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"calibration failed, nothing written: {'; '.join(problems)}. Check the board's columns "
                          f"and rows (inner corners: {session.board.columns}x{session.board.rows} now) and square size, "
                          "and the weak views above; --max-rms PX accepts larger errors", session.path)
+    uncertain = cal.uncertainty_problems()
+    if uncertain and not args.accept_uncertain:
+        raise InputError("calibration too uncertain, nothing written: " + "; ".join(uncertain)
+                         + ". The data do not determine this; add the views named, or keep it anyway (flagged in "
+                           "the rig and the report) with --accept-uncertain", session.path)
+    if uncertain:
+        cal.accepted_uncertain = list(uncertain)
+        report.accepted_uncertain = list(uncertain)
+        for u in uncertain:
+            print(f"warning: kept with --accept-uncertain: {u}", file=sys.stderr)
     words = getattr(args, "argv", None)
     command = "plantreg " + " ".join(shlex.quote(str(a)) for a in words) if words else None
     rig = calibrated_rig(cal, session, report, roi, command, excluded)
@@ -164,11 +204,29 @@ def _print_summary(session, detections, cal, report) -> None:
     for d in sorted(detections.values(), key=lambda d: d.key):
         if d.status == "failed":
             print(f"  not found: {d.pose}:{d.camera}: {d.reason}")
-    print("intrinsics (mean error px / normalised):")
+    print("intrinsics (value +- standard error; mean error px / normalised):")
     for name, c in cal.intrinsics.items():
         e = report.intrinsic.get(name)
-        print(f"  {name:14s} fx {c.K[0, 0]:9.2f} fy {c.K[1, 1]:9.2f} cx {c.K[0, 2]:8.2f} cy {c.K[1, 2]:8.2f} "
-              f"  {e['px']:.3f} px / {e['normalized']:.3f}  ({c.n_views} views)" if e else f"  {name}: -")
+        u = cal.uncertainty.get(name)
+        sd = u.std if u is not None else {}
+
+        def pm(k, v):
+            s_ = sd.get(k, 0.0)
+            return f"{k} {v:.2f}" + (f" +- {s_:.2f}" if s_ > 0 else " (fixed)")
+
+        print(f"  {name:14s} {pm('fx', c.K[0, 0])}  {pm('fy', c.K[1, 1])}  {pm('cx', c.K[0, 2])}  {pm('cy', c.K[1, 2])}"
+              + (f"   {e['px']:.3f} px / {e['normalized']:.3f}  ({c.n_views} views)" if e else ""))
+        lm = c.lens_model_dict()
+        print(f"  {'':14s} lens model: {lm.get('label', lm.get('model', '?'))} -- {lm.get('reason', '')}")
+        if u is not None:
+            med, worst = u.summary("intrinsics")
+            line = (f"  {'':14s} projection uncertainty at {u.distance_m:.2f} m: median {med:.2f} px, worst {worst:.2f} px"
+                    f" ({', '.join(u.add_views)} least certain)")
+            if u.rotation_deg is not None:
+                line += f"; pose vs {cal.reference}: +- {u.rotation_deg:.3f} deg, +- {u.translation_mm:.2f} mm"
+            print(line)
+    if cal.flipped:
+        print(f"symmetric board: corner order of {len(cal.flipped)} view(s) turned by 180 degrees to agree with the rig")
     cams = list(session.cameras)
     for title, table in (("extrinsic (epipolar)", report.extrinsic), ("depth", report.depth)):
         if table is None:

@@ -34,6 +34,13 @@ def build_parser() -> argparse.ArgumentParser:
     g = p.add_argument_group("landmark page")
     g.add_argument("--landmarks", type=Path, help="open the landmark page on this landmarks file (with --rig; "
                    "--recording adds a recording folder)")
+    g = p.add_argument_group("desktop integration (Linux)")
+    g = g.add_mutually_exclusive_group()
+    g.add_argument("--install-desktop", action="store_true",
+                   help="add plantreg to your applications menu (a desktop entry running this installed "
+                        "plantreg-gui, and its icon, under $XDG_DATA_HOME or ~/.local/share), then exit")
+    g.add_argument("--uninstall-desktop", action="store_true",
+                   help="remove what --install-desktop added, then exit")
     g = p.add_argument_group("automation")
     g.add_argument("--screenshot", type=Path, help="save a PNG of the window once the work is done, then exit")
     g.add_argument("--size", default="1500x950", help="window size WxH (default 1500x950)")
@@ -46,6 +53,10 @@ def main(argv: list[str] | None = None) -> int:
 
     multiprocessing.freeze_support()  # the wizard's worker process (core/jobs/process_job.py) in a frozen app
     args = build_parser().parse_args(argv)
+    if args.install_desktop or args.uninstall_desktop:  # no Qt needed
+        from ..desktop import main as desktop_main
+
+        return desktop_main("install" if args.install_desktop else "uninstall")
     try:
         w, h = (int(x) for x in args.size.lower().split("x"))
     except ValueError:
@@ -60,6 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     app.setApplicationName("plantreg")
     app.setOrganizationName("plantreg")
     app.setApplicationVersion(__version__)
+    app.setDesktopFileName("plantreg-gui")  # Wayland's app id: the installed entry's icon and name
     from .startup import preload_with_splash
 
     preload_with_splash(app, __version__)  # the 3D stack, before any window takes input

@@ -7,23 +7,29 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from PySide6.QtCore import QTimer
+from PySide6.QtCore import Qt, QTimer
 from PySide6.QtGui import QIcon
-from PySide6.QtWidgets import QApplication, QMainWindow, QTabWidget
+from PySide6.QtWidgets import QApplication, QMainWindow, QMenu, QTabWidget, QToolButton
 
-from .. import __version__
-
-ICON = Path(__file__).resolve().parents[2] / "resources" / "plantreg.svg"
+from .. import __version__, resources
 
 
 class MainWindow(QMainWindow):
     def __init__(self) -> None:
         super().__init__()
         self.setWindowTitle(f"plantreg {__version__}")
-        if ICON.is_file():  # source and editable installs; a wheel has no top-level resources/
-            self.setWindowIcon(QIcon(str(ICON)))
+        self.setWindowIcon(QIcon(str(resources.path(resources.ICON))))
         self.tabs = QTabWidget(self)
         self.tabs.setDocumentMode(True)
+        # Help in the tab bar's corner (no menu bar row: the window must fit small screens)
+        self.help_menu = QMenu("Help", self)
+        self.about_action = self.help_menu.addAction("About plantreg…", self.show_about)
+        hb = QToolButton()
+        hb.setText("Help")
+        hb.setMenu(self.help_menu)
+        hb.setPopupMode(QToolButton.ToolButtonPopupMode.InstantPopup)
+        hb.setAutoRaise(True)
+        self.tabs.setCornerWidget(hb)
         self.setCentralWidget(self.tabs)
         from .registration.workspace import RegistrationWorkspace
         from .calibration.wizard import CalibrationWizard
@@ -134,6 +140,22 @@ class MainWindow(QMainWindow):
         for w in (self.workspace, self.wizard, self.landmarks):
             w.shutdown()
         super().closeEvent(event)
+
+    def open_paths(self) -> list[tuple[str, Path | None]]:
+        """[(label, path)] of the files each page has open (None: nothing open), for About."""
+        wz = getattr(getattr(self.wizard, "model", None), "session", None)
+        lm = getattr(self.landmarks, "session", None)
+        return [("rig", self.workspace.rig_path), ("recording", self.workspace.recording_path),
+                ("calibration session", getattr(wz, "folder", None)),
+                ("landmarks file", getattr(getattr(lm, "landmarks", None), "path", None))]
+
+    def show_about(self) -> None:
+        from .about import AboutDialog
+
+        dlg = AboutDialog(self, self.open_paths())
+        dlg.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
+        self.about_dialog = dlg
+        dlg.open()
 
     def show_landmarks(self, rig_path: Path | None, recording: Path | None) -> None:
         """The workspace's File ▸ "Fit rig from landmarks…": the landmark page on its rig and recording."""

@@ -1,18 +1,29 @@
 """Intrinsics per camera and one joint estimate of the whole rig.
 
-1. *Intrinsics*: ``cv2.calibrateCamera`` per camera on its usable views (found, not excluded),
-   5 distortion coefficients (k3 fixed with fewer than 6 views; the 8-coefficient rational model
-   when it fits clearly better). Per-view errors = mean distance between projected and detected
-   corners with the view's own board pose.
-2. *Initial extrinsics*: for every camera, the relative pose to an already placed camera from
-   each shared pose (``R_cam_ref = R_cam_board R_board_ref``); the medoid over the shared poses
-   (robust to a bad view); cameras are placed breadth-first from the reference (the depth camera,
-   else the first camera). A camera sharing no pose with the placed ones is an error.
-3. *Joint refinement*: one bundle adjustment (``scipy.optimize.least_squares``, analytic
-   Jacobian from ``cv2.projectPoints`` chained through ``cv2.composeRT``, soft-L1 loss that is
-   quadratic below 1 px) over all cameras' intrinsics and poses and all board poses, minimising
-   the reprojection error of every used corner in every camera. (OpenCV 5's
-   ``calibrateMultiview`` needs every point of every frame; ours also takes partial ChArUco views.)
+1. *Intrinsics*: per camera on its usable views (found, not excluded), the lens model chosen by
+   leave-views-out cross-validation (:mod:`.lensmodel`), fitted with ``cv2.calibrateCamera``.
+   Cameras with given intrinsics (``known``: ``--intrinsics CAM=RIG.json`` or ``"intrinsics"`` in
+   session.json) keep them (fixed, or as priors with their standard errors). Per-view errors =
+   mean distance between projected and detected corners with the view's own board pose.
+2. *Initial extrinsics*: cameras are placed one at a time (the reference first: the depth camera,
+   else the first camera; then the camera sharing most board poses with those placed), each from
+   the board poses already known in the rig frame (``R_cam_rig = R_cam_board R_board_rig``), the
+   medoid over the shared poses (robust to a bad view). A symmetric board (it looks the same
+   turned by 180 degrees, so the detector's corner order is arbitrary per view) is resolved here:
+   both orders of every view are candidates, the pose most board poses agree with wins, and each
+   view keeps the order consistent with it (``Calibration.flipped``); a board pose seen by one
+   camera keeps that camera's order. A camera sharing no pose with the placed ones is an error.
+3. *Joint refinement*: one bundle adjustment (:mod:`.bundle`: Levenberg-Marquardt on the sparse
+   normal equations, Schur complement over the board poses, soft-L1 loss quadratic below 1 px)
+   over all cameras' intrinsics and poses and all board poses, minimising the reprojection error
+   of every used corner in every camera. (OpenCV 5's ``calibrateMultiview`` needs every point of
+   every frame; ours also takes partial ChArUco views.) Its covariance gives every parameter's
+   standard error and each camera's projection uncertainty (:mod:`.uncertainty`).
+
+Length: one pipeline (intrinsics, placement with the symmetric-board resolution, joint fit,
+per-view errors) whose steps share the views, their corner orders and the placed poses; the
+solver's parts that stand alone live beside it (:mod:`.bundle`, :mod:`.lensmodel`,
+:mod:`.uncertainty`, :mod:`.known`).
 
 Weak views: a view whose intrinsic error exceeds ``max(2 x median, median + 0.1 px)`` of its
 camera, or whose board pose disagrees with the rig by more than 1 degree (a flipped corner order
@@ -24,8 +35,8 @@ estimate (not of the intrinsics) and listed first among the weak views, saying s
 
 from __future__ import annotations
 
-from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -36,16 +47,27 @@ from ..errors import InputError
 from ..progress import Reporter, ensure_reporter
 from ..camera.rig import Rig
 from .board import Board
+from .bundle import DIST_NAMES, CameraBlock, bundle_adjust, param_names
+from .known import KnownIntrinsics, check_known_intrinsics, load_known_intrinsics, session_known_intrinsics
+from .lensmodel import MODEL_BY_NAME, ModelChoice, choose_model, fit_camera, focal_rel_std, principal_point_prior
+from .uncertainty import (MAX_PROJECTION_SIGMA_COVERED, MAX_PROJECTION_SIGMA_MEDIAN, MAX_ROTATION_SIGMA_DEG,
+                          MAX_TRANSLATION_SIGMA_MM,
+                          CameraUncertainty, projection_uncertainty, uncertainty_problems)
 from .detect import FOUND, MISSING, Detection, check_image_sizes, suggest_board_size
 from .session import Session
 
 MIN_VIEWS = 3
+#: fewer views than this leave the lens model unchecked (no cross-validation): refused as uncertain
+MIN_CV_VIEWS = 4
 #: A calibration whose joint RMS reprojection error, or one camera's, exceeds this many pixels
 #: has failed (a wrong board size gives ~9 px; good rigs 0.05-0.5 px): ``plantreg calibrate``
 #: writes nothing and exits non-zero unless ``--max-rms`` allows more (docs/errors.md).
 MAX_RMS_PX = 2.0
 WEAK_FACTOR, WEAK_MIN_EXCESS_PX, WEAK_POSE_DEG = 2.0, 0.1, 1.0
 INCONSISTENT_DEG = 5.0
+#: relative standard error of a camera's focal length from its own views above which its own
+#: views are taken not to determine its lens (placed last, from the board corners in 3D)
+UNDETERMINED_FOCAL = 0.02
 
 
 @dataclass
@@ -66,6 +88,9 @@ class CameraCalibration:
     per_view_px: dict[str, float]
     weak_views: list[tuple[str, float, str]] = field(default_factory=list)
     n_views: int = 0
+    #: the lens model chosen by cross-validation (None: intrinsics given, see ``known``)
+    model: ModelChoice | None = None
+    known: KnownIntrinsics | None = None
 
     @property
     def normalization(self) -> float:
@@ -74,7 +99,15 @@ class CameraCalibration:
     def to_dict(self) -> dict[str, Any]:
         return {"K": self.K.tolist(), "dist": self.dist.tolist(), "rms_px": self.rms_px, "mean_px": self.mean_px,
                 "n_views": self.n_views, "per_view_px": self.per_view_px,
-                "weak_views": [{"pose": p, "px": e, "reason": r} for p, e, r in self.weak_views]}
+                "weak_views": [{"pose": p, "px": e, "reason": r} for p, e, r in self.weak_views],
+                "lens_model": self.lens_model_dict()}
+
+    def lens_model_dict(self) -> dict[str, Any]:
+        if self.known is not None:
+            return {"model": "given", "source": self.known.source,
+                    "reason": "intrinsics given" + (" as priors with their standard errors" if self.known.std
+                                                    else ", held fixed")}
+        return self.model.to_dict() if self.model is not None else {}
 
 
 @dataclass
@@ -97,6 +130,17 @@ class Calibration:
     #: the final intrinsics and the view's own board pose (as ``per_view_px``), so that an
     #: exclusion can be judged; views whose board was not found are absent.
     excluded_px: dict[tuple[str, str], float] = field(default_factory=dict)
+    #: camera -> its uncertainty (standard errors, projection uncertainty; :mod:`.uncertainty`)
+    uncertainty: dict[str, CameraUncertainty] = field(default_factory=dict)
+    #: (pose, camera) views of a symmetric board whose detected corner order was reversed to
+    #: agree with the rig (the board looks the same turned by 180 degrees)
+    flipped: set[tuple[str, str]] = field(default_factory=set)
+    #: residual standard deviation per corner coordinate of the joint fit (px)
+    sigma_px: float = float("nan")
+    #: camera -> its corner noise per coordinate in the joint fit (px): its residuals' weight
+    noise_px: dict[str, float] = field(default_factory=dict)
+    #: set when the calibration was kept although its uncertainty exceeds the limits
+    accepted_uncertain: list[str] = field(default_factory=list)
 
     @property
     def weak_views(self) -> list[tuple[str, str, float, str]]:
@@ -105,15 +149,41 @@ class Calibration:
         return sorted(out, key=lambda x: (-("disagrees" in x[3]), -x[2]))
 
     def provenance(self) -> dict[str, Any]:
-        return {
+        out = {
             "reference": self.reference,
             "joint_rms_px": self.joint_rms_px,
+            "residual_sigma_px": self.sigma_px,
             "used_views": [f"{p}:{c}" for p, c in self.used_views],
+            "flipped_views": sorted(f"{p}:{c}" for p, c in self.flipped),
+            "uncertainty_limits": {"projection_sigma_median_px_or_diagonal": list(MAX_PROJECTION_SIGMA_MEDIAN),
+                                   "projection_sigma_where_seen_px_or_diagonal": list(MAX_PROJECTION_SIGMA_COVERED),
+                                   "rotation_sigma_deg": MAX_ROTATION_SIGMA_DEG,
+                                   "translation_sigma_mm": MAX_TRANSLATION_SIGMA_MM},
             "cameras": {n: {"rms_px": c.rms_px, "mean_px": c.mean_px,
                             "mean_normalized": c.mean_px * c.normalization, "n_views": c.n_views,
-                            "weak_views": [f"{p}:{n} {e:.3f} px ({r})" for p, e, r in c.weak_views]}
+                            "weak_views": [f"{p}:{n} {e:.3f} px ({r})" for p, e, r in c.weak_views],
+                            "lens_model": c.lens_model_dict()}
                         for n, c in self.intrinsics.items()},
         }
+        for n, u in self.uncertainty.items():
+            d = u.to_dict()
+            d.pop("grid")
+            out["cameras"][n]["uncertainty"] = d
+        if self.accepted_uncertain:
+            out["accepted_uncertain"] = self.accepted_uncertain
+        return out
+
+    def uncertainty_problems(self) -> list[str]:
+        """Cameras and poses whose uncertainty exceeds the documented limits, and cameras with too
+        few views to check their lens model against views it was not fitted to (one sentence
+        each): the standard errors hold only for a model the views support."""
+        out = []
+        for name, c in self.intrinsics.items():
+            if c.model is not None and c.model.n_folds == 0 and c.n_views < MIN_CV_VIEWS:
+                out.append(f"camera '{name}': only {c.n_views} views, too few to check its lens model against "
+                           f"views it was not fitted to (at least {MIN_CV_VIEWS}); record more board views, tilted, "
+                           "all over its image")
+        return out + uncertainty_problems(self.uncertainty)
 
 
 # ---------------------------------------------------------------------- small geometry helpers
@@ -140,30 +210,27 @@ def _view_points(det: Detection, board: Board) -> tuple[np.ndarray, np.ndarray]:
 
 # ---------------------------------------------------------------------- intrinsics
 def _calibrate_intrinsics(name: str, views: dict[str, Detection], board: Board, size: tuple[int, int]):
-    """``cv2.calibrateCamera`` with 5 coefficients (k3 fixed below 6 views); with 8 or more views
-    also the rational model (8 coefficients, as wide-angle ToF cameras need), kept only if it
-    lowers the RMS error by more than 10 %. Returns K, dist, {pose: (R_cam_board, t)}, flags."""
+    """The camera's lens model chosen by cross-validation (:mod:`.lensmodel`) and fitted to all
+    its views. Returns K, dist, {pose: (R_cam_board, t)}, the :class:`~.lensmodel.ModelChoice`."""
     poses = sorted(views)
-    obj = [_view_points(views[p], board)[0].astype(np.float32) for p in poses]
-    img = [views[p].corners.reshape(-1, 1, 2).astype(np.float32) for p in poses]
-    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-10)
-    candidates = [0 if len(poses) >= 6 else cv2.CALIB_FIX_K3]
-    if len(poses) >= 8:
-        candidates.append(cv2.CALIB_RATIONAL_MODEL)
-    best = None
-    for flags in candidates:
-        try:
-            rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(obj, img, size, None, None, flags=flags, criteria=crit)
-        except cv2.error as e:
-            if best is not None:
-                continue
-            raise InputError(f"camera '{name}': OpenCV could not calibrate it ({str(e).strip().splitlines()[-1]})") from None
-        if best is None or rms < 0.9 * best[0]:
-            nd = 8 if flags & cv2.CALIB_RATIONAL_MODEL else 5
-            best = (rms, K, dist.ravel()[:nd].copy(), rvecs, tvecs, flags)
-    rms, K, dist, rvecs, tvecs, flags = best
-    board_cam = {p: (cv2.Rodrigues(rv)[0], tv.ravel()) for p, rv, tv in zip(poses, rvecs, tvecs)}
-    return K, dist, board_cam, flags
+    obj = [_view_points(views[p], board)[0] for p in poses]
+    img = [views[p].corners.reshape(-1, 2).astype(np.float64) for p in poses]
+    choice, fit = choose_model(name, obj, img, size)
+    rms, K, dist, fitted = fit
+    board_cam = dict(zip(poses, fitted))
+    choice.focal_rel_std = focal_rel_std(obj, img, choice.model, fit, size)
+    return K, dist, board_cam, choice
+
+
+def _known_intrinsics_poses(known: "KnownIntrinsics", views: dict[str, Detection], board: Board):
+    """Board poses of a camera with given intrinsics (PnP per view)."""
+    out = {}
+    for p, d in sorted(views.items()):
+        obj, img = _view_points(d, board)
+        ok, rv, tv = cv2.solvePnP(obj, img, known.K, known.dist)
+        rv, tv = cv2.solvePnPRefineLM(obj, img, known.K, known.dist, rv, tv)
+        out[p] = (cv2.Rodrigues(rv)[0], tv.ravel())
+    return out
 
 
 def _per_view_errors(K, dist, views: dict[str, Detection], board: Board,
@@ -190,107 +257,77 @@ def _per_view_errors(K, dist, views: dict[str, Detection], board: Board,
     return out, poses, resid, rms
 
 
-# ---------------------------------------------------------------------- joint bundle adjustment
-def _pack_cam(K, dist, R, t):
-    return np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], dist, cv2.Rodrigues(R)[0].ravel(), t])
+# ---------------------------------------------------------------------- symmetric boards
+def _pnp_pose(d: Detection, board: Board, K: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    obj, img = _view_points(d, board)
+    ok, rv, tv = cv2.solvePnP(obj, img, K, dist)
+    rv, tv = cv2.solvePnPRefineLM(obj, img, K, dist, rv, tv)
+    return cv2.Rodrigues(rv)[0], tv.ravel()
 
 
-def _unpack_cam(x, nd: int):
-    K = np.array([[x[0], 0, x[2]], [0, x[1], x[3]], [0, 0, 1.0]])
-    return K, x[4 : 4 + nd], x[4 + nd : 7 + nd], x[7 + nd : 10 + nd]
+def _calibrate_from_3d(cam: str, views: dict[str, Detection], shared: list[str],
+                       board_rig: dict[str, tuple[np.ndarray, np.ndarray]], board: Board,
+                       size: tuple[int, int], choice) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A camera whose own views do not determine its focal length, calibrated from the board
+    corners of the poses already placed in the rig frame: together they are a non-planar target.
+    Returns K, dist (in the chosen model's length), R_cam_rig, t_cam_rig."""
+    X = np.concatenate([_view_points(views[p], board)[0] @ board_rig[p][0].T + board_rig[p][1] for p in shared])
+    uv = np.concatenate([views[p].corners.astype(np.float64) for p in shared])
+    w, h = size
+    f0 = float(np.hypot(w, h))
+    K0 = np.array([[f0, 0, (w - 1) / 2], [0, f0, (h - 1) / 2], [0, 0, 1.0]])
+    model = choice.model if choice is not None else MODEL_BY_NAME["k1k2"]
+    simple = MODEL_BY_NAME["k1k2"]
+    rv, tv = cv2.solvePnP(X, uv, K0, np.zeros(5))[1:]
+    fit = fit_camera([X], [uv], simple, K0, np.zeros(5), [(cv2.Rodrigues(rv)[0], tv.ravel())], size=size)
+    if model is not simple:
+        fit = fit_camera([X], [uv], model, fit[1], fit[2], fit[3], size=size)
+    _rms, K, dist, poses = fit
+    return K, dist, poses[0][0], poses[0][1]
 
 
-def _bundle_adjust(cams: list[str], ref: str, init_cam: dict[str, tuple], init_board: dict[str, tuple],
-                   obs: list[tuple[str, str, np.ndarray, np.ndarray]], fix_k3: dict[str, bool],
-                   progress: Reporter) -> tuple[dict[str, tuple], dict[str, tuple], float]:
-    """One joint least-squares fit of all intrinsics, camera poses and board poses.
+def flip_pose(board: Board, R: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The board pose (R_x_board (3, 3), t (3,)) of a detection whose corner order is reversed
+    (the board turned by 180 degrees about its centre's normal): corner k of the reversed order
+    is board point ``Rz(180) X_k + d`` with ``d`` the far inner corner."""
+    Rz = np.diag([-1.0, -1.0, 1.0])
+    d = np.array([(board.columns - 1) * board.square_size, (board.rows - 1) * board.square_size, 0.0])
+    return R @ Rz, R @ d + t
 
-    init_cam: cam -> (K, dist (5,) or (8,), R_cam_rig, t_cam_rig); init_board: pose ->
-    (R_rig_board, t_rig_board); obs: (pose, cam, obj (N, 3), img (N, 2)). The reference camera's
-    pose stays the identity (it defines the rig frame)."""
-    poses = sorted(init_board)
-    pi = {p: i for i, p in enumerate(poses)}
-    nd = {c: len(init_cam[c][1]) for c in cams}
-    off, o = {}, 0
-    for c in cams:
-        off[c] = o
-        o += 10 + nd[c]
-    x0 = np.concatenate([_pack_cam(*init_cam[c]) for c in cams]
-                        + [np.concatenate([cv2.Rodrigues(init_board[p][0])[0].ravel(), init_board[p][1]]) for p in poses])
-    nb0 = o
-    # free-parameter mask: the reference camera's pose is the rig frame; k3 fixed where asked
-    free = np.ones_like(x0, bool)
-    free[off[ref] + 4 + nd[ref] : off[ref] + 10 + nd[ref]] = False
-    for c in cams:
-        if fix_k3.get(c):
-            free[off[c] + 8] = False
-    idx_free = np.flatnonzero(free)
-    n_res = sum(2 * len(o[2]) for o in obs)
 
-    def full(xf):
-        x = x0.copy()
-        x[idx_free] = xf
-        return x
+def flipped_detection(d: Detection) -> Detection:
+    """The detection with its corner order reversed (a symmetric board seen turned by 180 degrees)."""
+    return replace(d, corners=np.ascontiguousarray(d.corners[::-1]))
 
-    nfree = len(idx_free)
-    col_of = -np.ones(len(x0), int)
-    col_of[idx_free] = np.arange(nfree)
 
-    def evaluate(xf, want_jac: bool):
-        # analytic Jacobian: projectPoints' derivatives chained through composeRT
-        progress.check()  # a cancellation point inside the solver
-        x = full(xf)
-        out = np.empty(n_res)
-        J = np.zeros((n_res, nfree)) if want_jac else None
-        k = 0
-        for pose, cam, obj, img in obs:
-            c0, n_d = off[cam], nd[cam]
-            K, dist, rvc, tc = _unpack_cam(x[c0 : c0 + 10 + n_d], n_d)
-            b = nb0 + 6 * pi[pose]
-            rv, tv, dr3dr1, dr3dt1, dr3dr2, dr3dt2, dt3dr1, dt3dt1, dt3dr2, dt3dt2 = cv2.composeRT(
-                x[b : b + 3], x[b + 3 : b + 6], rvc, tc)
-            proj, jac = cv2.projectPoints(obj, rv, tv, K, dist)
-            r = (proj.reshape(-1, 2) - img).ravel()
-            n = len(r)
-            out[k : k + n] = r
-            if want_jac:
-                Jr, Jt = jac[:, 0:3], jac[:, 3:6]
-                cols_cam = np.concatenate([jac[:, 6:10], jac[:, 10 : 10 + n_d],
-                                           Jr @ dr3dr2 + Jt @ dt3dr2, Jr @ dr3dt2 + Jt @ dt3dt2], axis=1)
-                cols_board = np.concatenate([Jr @ dr3dr1 + Jt @ dt3dr1, Jr @ dr3dt1 + Jt @ dt3dt1], axis=1)
-                for j in range(10 + n_d):
-                    cj = col_of[c0 + j]
-                    if cj >= 0:
-                        J[k : k + n, cj] = cols_cam[:, j]
-                for j in range(6):
-                    cj = col_of[b + j]
-                    if cj >= 0:
-                        J[k : k + n, cj] = cols_board[:, j]
-            k += n
-        return out, J
+def oriented_views(views: dict[str, dict[str, Detection]], flipped) -> dict[str, dict[str, Detection]]:
+    """``views`` (camera -> {pose: detection}) with the corner order of the ``flipped``
+    (pose, camera) views reversed (see :attr:`Calibration.flipped`)."""
+    if not flipped:
+        return views
+    return {c: {p: (flipped_detection(d) if (p, c) in flipped else d) for p, d in v.items()} for c, v in views.items()}
 
-    def residuals(xf):
-        return evaluate(xf, False)[0]
 
-    def jacobian(xf):
-        return evaluate(xf, True)[1]
-
-    progress(0.1, "joint refinement of all cameras and board poses")
-    from scipy.optimize import least_squares  # here: importing it costs ~1 s at GUI start-up
-
-    # soft-L1 loss (quadratic below 1 px): one misdetected view must not drag the whole rig
-    sol = least_squares(residuals, x0[idx_free], jac=jacobian, method="trf", loss="soft_l1", f_scale=1.0,
-                        x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100)
-    progress(0.95, "joint refinement done")
-    x = full(sol.x)
-    out_cam = {}
-    for c in cams:
-        K, dist, rv, t = _unpack_cam(x[off[c] : off[c] + 10 + nd[c]], nd[c])
-        out_cam[c] = (K, dist.copy(), cv2.Rodrigues(rv)[0], t.copy())
-    out_board = {p: (cv2.Rodrigues(x[nb0 + 6 * pi[p] : nb0 + 6 * pi[p] + 3])[0], x[nb0 + 6 * pi[p] + 3 : nb0 + 6 * pi[p] + 6].copy())
-                 for p in poses}
-    rms = float(np.sqrt(np.mean(sol.fun**2) * 2)) if len(sol.fun) else float("nan")
-    return out_cam, out_board, rms
+def _consensus(cands: list[tuple[str, int, np.ndarray, np.ndarray]]):
+    """Among candidate camera poses [(pose, flip, R_cam_rig, t_cam_rig)] (two per board pose of
+    a symmetric board, one per ordering), the one most board poses agree with (rotation within
+    ``INCONSISTENT_DEG``), and per board pose the flip closest to it."""
+    best, best_key = None, None
+    for i, (_p, _f, Ri, ti) in enumerate(cands):
+        angs: dict[str, float] = {}
+        for p, _f2, Rj, _tj in cands:
+            a = _angle_deg(Ri @ Rj.T)
+            angs[p] = min(angs.get(p, np.inf), a)
+        support = sum(a < INCONSISTENT_DEG for a in angs.values())
+        key = (-support, float(np.median(list(angs.values()))))
+        if best_key is None or key < best_key:
+            best, best_key = i, key
+    Rb = cands[best][2]
+    chosen: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
+    for p, f, R, t in cands:
+        if p not in chosen or _angle_deg(R @ Rb.T) < _angle_deg(chosen[p][1] @ Rb.T):
+            chosen[p] = (f, R, t)
+    return chosen
 
 
 # ---------------------------------------------------------------------- main entry
@@ -355,14 +392,18 @@ def quality_problems(cal: "Calibration", max_rms_px: float = MAX_RMS_PX) -> list
 
 def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
               excluded: set[tuple[str, str]] | frozenset = frozenset(),
-              progress: Reporter | None = None) -> Calibration:
+              progress: Reporter | None = None,
+              known: dict[str, KnownIntrinsics] | None = None) -> Calibration:
     """Calibrate every camera of ``session`` from ``detections`` ((pose, camera) -> Detection),
-    leaving out ``excluded`` views. Raises :class:`InputError` for images of different sizes
-    for one camera, a camera with fewer than 3 usable poses, or one sharing no pose with the
-    others."""
+    leaving out ``excluded`` views. ``known`` camera -> intrinsics held fixed (or priors with
+    their standard errors); default: the session's ``"intrinsics"`` entries. Raises
+    :class:`InputError` for images of different sizes for one camera, a camera with fewer than 3
+    usable poses, or one sharing no pose with the others."""
     progress = ensure_reporter(progress)
     board = session.board
     sizes = check_image_sizes(session, detections)
+    known = dict(session_known_intrinsics(session) if known is None else known)
+    check_known_intrinsics(session, known, sizes)
     views = usable_views(session, detections, excluded)
     for cam in session.cameras:
         if len(views[cam]) < MIN_VIEWS:
@@ -370,47 +411,80 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
     cams = list(session.cameras)
     ref = session.depth_camera or cams[0]
 
-    # 1. intrinsics per camera
+    # 1. intrinsics per camera, the lens model chosen by cross-validation
     intr: dict[str, Any] = {}
     with progress.stage("intrinsics", 0.0):
         for i, cam in enumerate(cams):
             progress(0.3 * i / len(cams), f"intrinsics of {cam} ({len(views[cam])} views)")
-            intr[cam] = _calibrate_intrinsics(cam, views[cam], board, sizes[cam])
+            if cam in known:
+                k = known[cam]
+                intr[cam] = (k.K, k.dist, _known_intrinsics_poses(k, views[cam], board), None)
+            else:
+                intr[cam] = _calibrate_intrinsics(cam, views[cam], board, sizes[cam])
 
-    # 2. initial extrinsics, breadth-first from the reference
-    placed: dict[str, tuple[np.ndarray, np.ndarray]] = {ref: (np.eye(3), np.zeros(3))}
-    queue = deque([ref])
-    while queue:
-        a = queue.popleft()
-        for b in cams:
-            if b in placed:
-                continue
-            shared = sorted(set(views[a]) & set(views[b]))
-            if not shared:
-                continue
-            Ra_rig, ta_rig = placed[a]
+    # 2. initial extrinsics: cameras placed one by one (most shared poses first) against the
+    # board poses already known in the rig frame; for a symmetric board each view's two corner
+    # orders are both tried and the one consistent with the rig kept
+    symmetric = board.is_symmetric
+    # placement starts at the camera whose own views determine its lens best (the reference's may
+    # not: e.g. boards all facing it); cameras whose own views leave their focal length undetermined
+    # come last, calibrated from the board corners already placed in 3D (not planar any more)
+    rel = {c: (0.0 if c in known else getattr(intr[c][3], "focal_rel_std", 0.0)) for c in cams}
+    weak_f = {c for c in cams if not rel[c] <= UNDETERMINED_FOCAL}
+    anchor = min(cams, key=lambda c: (rel[c], c != ref))
+    placed: dict[str, tuple[np.ndarray, np.ndarray]] = {anchor: (np.eye(3), np.zeros(3))}
+    flipped: set[tuple[str, str]] = set()
+    board_rig: dict[str, tuple[np.ndarray, np.ndarray]] = {p: intr[anchor][2][p] for p in views[anchor]}
+
+    def own(cam, p):
+        R, t = intr[cam][2][p]
+        return flip_pose(board, R, t) if (p, cam) in flipped else (R, t)
+
+    while len(placed) < len(cams):
+        todo = [c for c in cams if c not in placed]
+        b = max(todo, key=lambda c: (c not in weak_f, len(set(views[c]) & set(board_rig))))
+        shared = sorted(set(views[b]) & set(board_rig))
+        if not shared:
+            c = todo[0]
+            others = sorted({p for o in placed for p in views[o]})
+            raise InputError(
+                f"camera '{c}' shares no board pose with {', '.join(sorted(placed))}: it saw the board in "
+                f"{', '.join(sorted(views[c]))}, the others in {', '.join(others)}. Record poses in which "
+                f"'{c}' and another camera see the board at the same time", session.folder)
+        if b in weak_f and len(weak_f) < len(cams) and not symmetric:
+            K, dist, R_b, t_b = _calibrate_from_3d(b, views[b], shared, board_rig, board, sizes[b], intr[b][3])
+            intr[b] = (K, dist, {p: _pnp_pose(views[b][p], board, K, dist) for p in views[b]}, intr[b][3])
+            placed[b] = (R_b, t_b)
+        else:
             cands = []
             for p in shared:
-                Rab, tab = intr[a][2][p]  # board in a
-                Rbb, tbb = intr[b][2][p]  # board in b
-                R_b_a = Rbb @ Rab.T
-                t_b_a = tbb - R_b_a @ tab
-                cands.append((R_b_a @ Ra_rig, R_b_a @ ta_rig + t_b_a))
-            placed[b] = _medoid_pose(cands)
-            queue.append(b)
-    missing = [c for c in cams if c not in placed]
-    if missing:
-        c = missing[0]
-        others = sorted({p for o in placed for p in views[o]})
-        raise InputError(
-            f"camera '{c}' shares no board pose with {', '.join(sorted(placed))}: it saw the board in "
-            f"{', '.join(sorted(views[c]))}, the others in {', '.join(others)}. Record poses in which "
-            f"'{c}' and another camera see the board at the same time", session.folder)
+                R_rb, t_rb = board_rig[p]
+                for f in ((0, 1) if symmetric else (0,)):
+                    R_bb, t_bb = intr[b][2][p]
+                    if f:
+                        R_bb, t_bb = flip_pose(board, R_bb, t_bb)
+                    R_b_rig = R_bb @ R_rb.T
+                    cands.append((p, f, R_b_rig, t_bb - R_b_rig @ t_rb))
+            chosen = _consensus(cands)
+            for p, (f, _R, _t) in chosen.items():
+                if f:
+                    flipped.add((p, b))
+            placed[b] = _medoid_pose([(R, t) for _f, R, t in chosen.values()])
+        Rb, tb = placed[b]
+        for p in views[b]:
+            if p not in board_rig:
+                R_bb, t_bb = own(b, p)
+                board_rig[p] = (Rb.T @ R_bb, Rb.T @ (t_bb - tb))
+    if anchor != ref:  # express everything in the reference camera's frame
+        R_ref, t_ref = placed[ref]
+        placed = {c: (R @ R_ref.T, t - R @ R_ref.T @ t_ref) for c, (R, t) in placed.items()}
+        placed[ref] = (np.eye(3), np.zeros(3))  # exactly (not -0.0 mm of rounding)
     progress(0.35, "initial extrinsics")
 
     # board poses in the rig frame: the medoid of what the cameras that saw the pose say. A view
     # disagreeing with it by more than INCONSISTENT_DEG (e.g. a corner order flipped by 180
     # degrees) is left out of the joint estimate and reported, never used silently.
+    views = oriented_views(views, flipped)
     all_poses = sorted({p for c in cams for p in views[c]})
     init_board, outliers = {}, {}
     for p in all_poses:
@@ -418,7 +492,7 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
         for c in [ref] + [c for c in cams if c != ref]:
             if p in views[c]:
                 Rc, tc = placed[c]
-                Rcb, tcb = intr[c][2][p]
+                Rcb, tcb = own(c, p)
                 preds[c] = (Rc.T @ Rcb, Rc.T @ (tcb - tc))
         init_board[p] = _medoid_pose(list(preds.values())) if len(preds) > 2 else next(iter(preds.values()))
         for c, (Rp, _tp) in preds.items():
@@ -426,17 +500,36 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
             if ang > INCONSISTENT_DEG:
                 outliers[(p, c)] = ang
 
-    # 3. joint refinement
+    # 3. joint refinement (with the covariance of every camera's parameters)
     obs = [(p, c, *_view_points(views[c][p], board)) for c in cams for p in sorted(views[c]) if (p, c) not in outliers]
-    init_cam = {c: (intr[c][0], intr[c][1], *placed[c]) for c in cams}
-    fix_k3 = {c: bool(intr[c][3] & cv2.CALIB_FIX_K3) for c in cams}
+    blocks = {}
+    for c in cams:
+        K0, d0 = intr[c][0], np.asarray(intr[c][1], float)
+        if c in known:
+            k = known[c]
+            names = param_names(len(d0))
+            fixed = set(names[: 4 + len(d0)]) - set(k.std)
+            prior = {n: (float(_cam_value(K0, d0, n)), s) for n, s in k.std.items() if n in names[: 4 + len(d0)]}
+            blocks[c] = CameraBlock(K0, d0, *placed[c], fixed=fixed, prior=prior)
+        else:
+            blocks[c] = CameraBlock(K0, d0, *placed[c], fixed=set(intr[c][3].model.fixed),
+                                    prior=principal_point_prior(sizes[c]))
     with progress.stage("joint refinement", 0.35):
-        cam_res, board_res, joint_rms = _bundle_adjust(cams, ref, init_cam, init_board, obs, fix_k3, progress.sub(0.35, 0.85))
+        ba = bundle_adjust(cams, ref, blocks, init_board, obs, progress.sub(0.35, 0.6), covariance=False)
+        # again with every camera's residuals weighed by its own corner noise (a 4K camera's
+        # detector and a thermal camera's differ): maximum likelihood, and an honest covariance
+        noise = {c: max(ba.sigma_cam.get(c, 1.0), 1e-3) for c in cams}
+        for c in cams:
+            K1, d1, R1, t1 = ba.cams[c]
+            blocks[c] = replace(blocks[c], K=K1, dist=d1, R_cam_rig=R1, t_cam_rig=t1)
+        ba = bundle_adjust(cams, ref, blocks, ba.boards, obs, progress.sub(0.6, 0.85), noise=noise)
+    cam_res, board_res, joint_rms = ba.cams, ba.boards, ba.rms_px
 
-    # 4. per-view errors and weak views
+    # 4. per-view errors, weak views, uncertainty
     intrinsics: dict[str, CameraCalibration] = {}
     view_pose_deg: dict[tuple[str, str], float] = {}
     view_board_cam: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+    unc: dict[str, CameraUncertainty] = {}
     cameras = []
     for cam in cams:
         K, dist, R, t = cam_res[cam]
@@ -459,14 +552,39 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
                 weak.append((p, e, f"error {e:.3f} px is {e / med:.1f}x the median {med:.3f} px"))
         weak.sort(key=lambda w: (-("disagrees" in w[2]), -w[1]))
         w, h = sizes[cam]
-        intrinsics[cam] = CameraCalibration(cam, session.cameras[cam], w, h, K, dist, rms, float(allr.mean()),
-                                            dict(sorted(per_view.items())), weak, len(per_view))
+        used_uv = [views[cam][p].corners.astype(float) for p in views[cam] if (p, cam) not in outliers]
+        dists = [float(np.linalg.norm(init[p][1])) for p in views[cam] if (p, cam) not in outliers]
+        unc[cam] = projection_uncertainty(cam, K, dist, R, t, ba.cov[cam], ba.names[cam], (w, h),
+                                          float(np.median(dists)), used_uv, cam == ref)
+        cc = CameraCalibration(cam, session.cameras[cam], w, h, K, dist, rms, float(allr.mean()),
+                               dict(sorted(per_view.items())), weak, len(per_view))
+        cc.model = intr[cam][3]
+        cc.known = known.get(cam)
+        intrinsics[cam] = cc
         cameras.append(Camera(cam, session.cameras[cam], w, h, K, dist, R, t))
     rig = Rig(cameras, session.depth_camera, session.depth_scale)
     progress(1.0, "calibration done")
     used = sorted((p, c) for c in cams for p in views[c] if (p, c) not in outliers)
-    return Calibration(rig, board, intrinsics, board_res, used, joint_rms, ref, view_pose_deg, view_board_cam,
-                       excluded_view_errors(intrinsics, session, detections, excluded))
+    cal = Calibration(rig, board, intrinsics, board_res, used, joint_rms, ref, view_pose_deg, view_board_cam,
+                      excluded_view_errors(intrinsics, session, oriented_views_detections(detections, flipped),
+                                           excluded))
+    cal.uncertainty = unc
+    cal.flipped = flipped
+    cal.sigma_px = float(np.sqrt(np.mean([v**2 for v in ba.sigma_cam.values()]))) if ba.sigma_cam else float("nan")
+    cal.noise_px = dict(ba.sigma_cam)
+    return cal
+
+
+def _cam_value(K: np.ndarray, dist: np.ndarray, name: str) -> float:
+    return {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]}.get(name) if name in ("fx", "fy", "cx", "cy") \
+        else float(dist[DIST_NAMES.index(name)])
+
+
+def oriented_views_detections(detections: dict[tuple[str, str], Detection], flipped) -> dict[tuple[str, str], Detection]:
+    """``detections`` with the corner order of ``flipped`` views reversed."""
+    if not flipped:
+        return detections
+    return {k: (flipped_detection(d) if k in flipped and d.corners is not None else d) for k, d in detections.items()}
 
 
 def excluded_view_errors(intrinsics: dict[str, "CameraCalibration"], session: Session,

@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import InputError
 from ..io.imageio import atomic_write_text, read_image
 from ..progress import Reporter, ensure_reporter
-from .calibrate import Calibration, _per_view_errors, usable_views
+from .calibrate import Calibration, _per_view_errors, oriented_views, usable_views
 from .detect import Detection
 from .session import Session, view_key
 
@@ -74,6 +74,12 @@ class CalibrationReport:
     cameras: dict[str, dict[str, Any]] = field(default_factory=dict)
     weak_views: list[dict[str, Any]] = field(default_factory=list)
     excluded: list[str] = field(default_factory=list)
+    #: camera -> :meth:`~.uncertainty.CameraUncertainty.to_dict` (standard errors, projection
+    #: uncertainty grid and summary, "add views here") plus "lens_model" (the choice and its
+    #: cross-validated errors)
+    uncertainty: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: the uncertainty limits exceeded (kept only with --accept-uncertain / the wizard's confirmation)
+    accepted_uncertain: list[str] = field(default_factory=list)
     #: problems worth a line in the report and on stderr (e.g. a depth map without valid pixels)
     warnings: list[str] = field(default_factory=list)
 
@@ -83,7 +89,8 @@ class CalibrationReport:
             "intrinsic": self.intrinsic, "extrinsic": self.extrinsic, "depth": self.depth,
             "views": self.views, "depth_bias_mm": self.depth_bias_mm, "depth_bias": self.depth_bias,
             "cameras": self.cameras, "weak_views": self.weak_views, "excluded": self.excluded,
-            "warnings": self.warnings,
+            "warnings": self.warnings, "uncertainty": self.uncertainty,
+            "accepted_uncertain": self.accepted_uncertain,
         }
 
     # ------------------------------------------------------------------ CSV
@@ -99,6 +106,8 @@ class CalibrationReport:
             e = self.intrinsic.get(c)
             w.writerow([c, _fmt(e, "px"), _fmt(e, "normalized"), "" if e is None else e["n"]])
         out["intrinsic"] = buf.getvalue()
+        if self.uncertainty:
+            out["uncertainty"] = self._uncertainty_csv()
         for name, table in (("extrinsic", self.extrinsic), ("depth", self.depth)):
             if table is None:
                 continue
@@ -118,6 +127,29 @@ class CalibrationReport:
                             d["within_spec"], d["n_pixels"]])
             out["depth_bias"] = buf.getvalue()
         return out
+
+    def _uncertainty_csv(self) -> str:
+        """One row per camera parameter: value and standard error; then each camera's projection
+        uncertainty (median and worst over the image, px) at its working distance."""
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(["camera", "parameter", "value", "std", "unit"])
+        for c, u in self.uncertainty.items():
+            vals = u.get("values", {})
+            for k, sd in u.get("std", {}).items():
+                unit = ("deg" if k == "rotation_deg" else "mm" if k == "translation_mm"
+                        else "px" if k in ("fx", "fy", "cx", "cy") else "")
+                v = vals.get(k)
+                w.writerow([c, k, "" if v is None else f"{v:.6g}", f"{sd:.4g}" if sd > 0 else "fixed", unit])
+            ps = u.get("projection_sigma_px", {})
+            for k in ("median", "worst", "rig_median", "rig_worst"):
+                if k in ps:
+                    w.writerow([c, f"projection_sigma_{k}", "", f"{ps[k]:.4g}", "px"])
+            w.writerow([c, "working_distance", f"{u.get('working_distance_m', float('nan')):.4g}", "", "m"])
+            lm = u.get("lens_model", {})
+            if lm:
+                w.writerow([c, "lens_model", lm.get("model", ""), "", ""])
+        return buf.getvalue()
 
     def write_csv(self, folder: str | Path, prefix: str = "") -> list[Path]:
         """Write the tables as ``<prefix><table>.csv`` into ``folder`` (atomically); returns the paths."""
@@ -210,7 +242,8 @@ def error_tables(session: Session, calibration: Calibration, detections: dict[tu
     progress = ensure_reporter(progress)
     cal = calibration
     cams = list(session.cameras)
-    views = usable_views(session, detections, excluded)
+    # a symmetric board's views in the corner order the calibration settled on
+    views = oriented_views(usable_views(session, detections, excluded), getattr(cal, "flipped", set()))
     norm = {c: cal.rig.camera(c).normalization for c in cams}
 
     # intrinsic
@@ -301,7 +334,31 @@ def error_tables(session: Session, calibration: Calibration, detections: dict[tu
                    "normalization": norm[c], "modality": session.cameras[c]} for c in cams}
     weak = [{"pose": p, "camera": c, "px": e, "reason": r} for p, c, e, r in cal.weak_views]
     return CalibrationReport(intrinsic, extrinsic, depth, {"intrinsic": v_intr, "extrinsic": v_ext, "depth": v_depth},
-                             bias_mm, bias, cameras, weak, sorted(view_key(p, c) for p, c in excluded), warn)
+                             bias_mm, bias, cameras, weak, sorted(view_key(p, c) for p, c in excluded), warnings=warn,
+                             uncertainty=uncertainty_dict(cal),
+                             accepted_uncertain=list(getattr(cal, "accepted_uncertain", [])))
+
+
+def uncertainty_dict(cal: Calibration) -> dict[str, dict[str, Any]]:
+    """camera -> its uncertainty (:meth:`~.uncertainty.CameraUncertainty.to_dict`) with the
+    parameter values beside their standard errors and the lens model choice."""
+    out = {}
+    for c, u in getattr(cal, "uncertainty", {}).items():
+        d = u.to_dict()
+        cc = cal.intrinsics[c]
+        cam = cal.rig.camera(c)
+        vals = {"fx": cc.K[0, 0], "fy": cc.K[1, 1], "cx": cc.K[0, 2], "cy": cc.K[1, 2]}
+        for k, v in zip(("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"), cc.dist):
+            vals[k] = float(v)
+        if c != cal.reference:
+            from .calibrate import _angle_deg
+
+            vals["rotation_deg"] = _angle_deg(cam.R_cam_rig)
+            vals["translation_mm"] = float(1000 * np.linalg.norm(cam.t_cam_rig))
+        d["values"] = {k: float(v) for k, v in vals.items()}
+        d["lens_model"] = cc.lens_model_dict()
+        out[c] = d
+    return out
 
 
 def empty_depth_maps(session: Session) -> tuple[list, list]:

@@ -32,7 +32,8 @@ def calibrated_rig(calibration: Calibration, session: Session, report: Calibrati
     src = calibration.rig
     rig = Rig.from_dict(src.to_dict())
     for cam in rig.cameras:  # units and band wavelengths: not calibrated, but the rig file carries them
-        cam.extra.update(getattr(session, "camera_meta", {}).get(cam.name, {}))
+        meta = getattr(session, "camera_meta", {}).get(cam.name, {})
+        cam.extra.update({k: v for k, v in meta.items() if k in ("units", "bands")})
     if roi is not None:
         lo, hi = np.asarray(roi[0], float), np.asarray(roi[1], float)
         if lo.shape != (3,) or hi.shape != (3,) or not np.all(lo < hi):
@@ -61,7 +62,7 @@ def calibrated_rig(calibration: Calibration, session: Session, report: Calibrati
 
 #: Every table a report can have as CSV (``<report stem>_<table>.csv``): the names a
 #: command must keep free and the stale ones a rewrite removes.
-CSV_TABLES = ("intrinsic", "extrinsic_px", "extrinsic_normalized", "depth_px", "depth_normalized", "depth_bias")
+CSV_TABLES = ("intrinsic", "uncertainty", "extrinsic_px", "extrinsic_normalized", "depth_px", "depth_normalized", "depth_bias")
 
 
 def report_files(report_path: str | Path) -> list[Path]:
@@ -117,16 +118,18 @@ def _json_default(o: Any) -> Any:
 def run_session(session: Session, excluded: set[tuple[str, str]] | frozenset | None = None,
                 options: dict[tuple[str, str], DetectOptions] | None = None,
                 roi: tuple[np.ndarray, np.ndarray] | None = None,
-                progress: Reporter | None = None) -> tuple[dict[tuple[str, str], Detection], Calibration, CalibrationReport]:
+                progress: Reporter | None = None, known: dict | None = None,
+                ) -> tuple[dict[tuple[str, str], Detection], Calibration, CalibrationReport]:
     """Detection, calibration and error tables in one go (what ``plantreg calibrate`` does).
-    ``excluded`` defaults to the session's reviewed exclusions."""
+    ``excluded`` defaults to the session's reviewed exclusions; ``known`` camera ->
+    :class:`~.calibrate.KnownIntrinsics` (default: the session's ``"intrinsics"`` entries)."""
     progress = ensure_reporter(progress)
     excluded = session.excluded() if excluded is None else set(excluded)
     if not session.poses:
         raise InputError("the session has no pose folders (one sub-folder per board pose, images named after the cameras)",
                          session.folder)
     detections = {d.key: d for d in detect_session(session, options, progress.sub(0.0, 0.6))}
-    cal = calibrate(session, detections, excluded, progress.sub(0.6, 0.75))
+    cal = calibrate(session, detections, excluded, progress.sub(0.6, 0.75), known=known)
     report = error_tables(session, cal, detections, excluded, progress.sub(0.75, 1.0), roi=roi)
     report.detection = detection_summary(detections)
     return detections, cal, report

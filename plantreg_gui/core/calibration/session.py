@@ -47,6 +47,10 @@ def camera_meta_from_dict(c: dict[str, Any], what: str, path) -> dict[str, Any]:
         if not isinstance(c["units"], str):
             raise InputError(f"{what}: \"units\" must be a string (e.g. \"degC\")", path)
         meta["units"] = c["units"]
+    if c.get("intrinsics") is not None:  # a rig file whose intrinsics this camera keeps (calibrate.py)
+        if not isinstance(c["intrinsics"], str) or not c["intrinsics"]:
+            raise InputError(f"{what}: \"intrinsics\" must be the path of a rig file", path)
+        meta["intrinsics"] = c["intrinsics"]
     if c.get("bands") is not None:
         b = c["bands"]
         if not isinstance(b, list) or not b or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in b):

@@ -36,6 +36,7 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 
 from ... import __version__
+from ...versions import dist_version as _dist_version
 from ..display import display
 from ..camera import modality
 from ..errors import InputError
@@ -661,36 +662,6 @@ def _versions_cached() -> dict[str, str | None]:
     for mod in ("open3d", "tifffile", "plyfile"):
         v[mod] = _dist_version(mod)
     return v
-
-
-def _dist_version(name: str) -> str | None:
-    """The installed version of distribution ``name`` (None if not installed), from the name of
-    its ``<name>-<version>.dist-info`` folder beside the module. Why: ``importlib.metadata``
-    imports the ``email`` package and parses METADATA files: a share of a paper-sized
-    ``plantreg register`` (its summary is written on the critical path)."""
-    import importlib.util
-
-    try:
-        spec = importlib.util.find_spec(name)
-    except (ImportError, ValueError):
-        spec = None
-    if spec is None or not spec.origin:
-        return None
-    origin = Path(spec.origin)
-    site = origin.parent.parent if origin.name == "__init__.py" else origin.parent
-    prefix = name.replace("-", "_").lower() + "-"
-    try:
-        found = [d.name for d in site.iterdir() if d.name.lower().startswith(prefix) and d.name.endswith(".dist-info")]
-    except OSError:
-        found = []
-    if len(found) == 1:
-        return found[0][len(prefix):-len(".dist-info")]
-    try:  # several or none beside it (an unusual layout): ask the metadata
-        from importlib.metadata import version
-
-        return version(name)
-    except Exception:  # not installed / no metadata: record that, do not fail an export
-        return None
 
 
 def _jsonable(x: Any) -> Any:

@@ -35,6 +35,7 @@ _lock = threading.Lock()  # one job at a time in the one child; others wait (can
 _state_lock = threading.Lock()  # creating / killing the pool (held briefly: the GUI thread takes it)
 _state: dict[str, Any] = {}  # "pool", "queue", "cancel"
 _ids = itertools.count(1)
+_exit_hook: list[bool] = []  # [True] once _kill_pool is registered with atexit
 
 # --- in the child
 _child: dict[str, Any] = {}
@@ -84,6 +85,14 @@ def _pool() -> tuple[cf.ProcessPoolExecutor, Any, Any]:
 
 def _pool_locked() -> tuple[cf.ProcessPoolExecutor, Any, Any]:
     if "pool" not in _state:
+        if not _exit_hook:
+            # the pool must not live into the interpreter's teardown: freed there, its manager
+            # thread's weakref callback ran after multiprocessing was gone ("Exception ignored in
+            # ... weakref_cb ... AttributeError: 'NoneType' object has no attribute 'util'")
+            import atexit
+
+            atexit.register(_kill_pool)
+            _exit_hook.append(True)
         ctx = mp.get_context("spawn")
         q, ev = ctx.Queue(), ctx.Event()
         _state["pool"] = cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_child_init,

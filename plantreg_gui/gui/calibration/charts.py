@@ -178,9 +178,10 @@ class PerViewChart(_Chart):
             used, ex = self.bars.get(cam, {}), self.excluded_bars.get(cam, {})
             weak = self._weak.get(cam, set())
             m = self._mean.get(cam)
-            title = f"{cam}: per-view reprojection error"
+            # short: with the uncertainty map beside it a panel is ~300 px wide
+            title = f"{cam}: error per view"
             if m is not None and math.isfinite(m):
-                title += f" (dashed: mean {m:.3f} px)"
+                title += f" (mean {m:.3f} px, dashed)"
             n_weak = sum(1 for q in poses if q in weak and q in used)
             if n_weak:
                 title += f", {n_weak} weak"
@@ -280,3 +281,84 @@ class BiasChart(_Chart):
         p.drawText(QRectF(panel.rect.left(), panel.rect.top() + 2, panel.rect.width() - 6, 16),
                    Qt.AlignmentFlag.AlignRight, "dashed: Azure Kinect spec ±(11 mm + 0.1 % of distance)")
         p.end()
+
+
+def _sigma_colour(ratio: float) -> QColor:
+    """Green (well below the camera's limit) -> yellow (at half) -> red (at the limit or above)."""
+    if not math.isfinite(ratio):
+        return QColor("#dddddd")
+    t = min(max(ratio, 0.0), 1.0)
+    hue = 120 - 120 * t
+    return QColor.fromHsvF(hue / 360.0, 0.55, 1.0)
+
+
+class UncertaintyMap(_Chart):
+    """Projection uncertainty heat map per camera (mrcal-style): each grid cell coloured by its
+    standard deviation (px) relative to the camera's limit, cells where no board corner was seen
+    hatched, the three least certain cells outlined, the value written where the cell is big
+    enough. One panel per camera, laid out in as many columns as make them largest."""
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent, min_height=180)
+        self._maps: list[dict] = []
+
+    def set_data(self, maps: list[dict]) -> None:
+        """``maps``: [{"camera", "sigma" (H, W) px, "corners" (H, W), "limit" px, "title"}]."""
+        self._maps = list(maps)
+        self.update()
+
+    def paintEvent(self, event) -> None:  # noqa: N802
+        p = QPainter(self)
+        p.setRenderHint(QPainter.RenderHint.Antialiasing, False)
+        if not self._maps:
+            self._message(p, "No uncertainty yet: it is computed with the calibration.")
+            return
+        small = self._small()
+        p.setFont(small)
+        n = len(self._maps)
+        W, H = self.width(), self.height()
+        fm = p.fontMetrics()
+        title_h0 = 2 * fm.height() + 14
+        aspect0 = float(np.median([m.get("aspect", 4 / 3) for m in self._maps]))
+
+        def size(c: int) -> float:  # panel width with ``c`` columns
+            r = math.ceil(n / c)
+            return min(W / c - 16, (H / r - title_h0) * aspect0)
+
+        cols = max(range(1, n + 1), key=size)
+        rows = math.ceil(n / cols)
+        cw, ch = W / cols, H / rows
+        for k, m in enumerate(self._maps):
+            x0, y0 = (k % cols) * cw, (k // cols) * ch
+            sig = np.asarray(m["sigma"], float)
+            cnt = np.asarray(m["corners"])
+            gh, gw = sig.shape
+            title_h = 2 * fm.height() + 6
+            aspect = m.get("aspect", gw / gh)
+            avail_w, avail_h = cw - 16, ch - title_h - 10
+            pw = min(avail_w, avail_h * aspect)
+            ph = pw / aspect
+            left, top = x0 + (cw - pw) / 2, y0 + title_h + 4
+            p.setPen(QColor("#222222"))
+            for li, line in enumerate(str(m["title"]).split("\n")[:2]):  # two lines, each elided to fit
+                p.drawText(QRectF(x0 + 4, y0 + 2 + li * fm.height(), cw - 8, fm.height()), Qt.AlignmentFlag.AlignLeft,
+                           fm.elidedText(line, Qt.TextElideMode.ElideRight, int(cw - 8)))
+            lim = float(m["limit"])
+            worst = set(np.argsort(-sig.ravel())[:3].tolist())
+            sx, sy = pw / gw, ph / gh
+            for i in range(gh):
+                for j in range(gw):
+                    r = QRectF(left + j * sx, top + i * sy, sx + 0.5, sy + 0.5)
+                    p.fillRect(r, _sigma_colour(sig[i, j] / lim if lim > 0 else float("nan")))
+                    if cnt[i, j] == 0:
+                        p.fillRect(r, QBrush(QColor(0, 0, 0, 60), Qt.BrushStyle.BDiagPattern))
+                    if i * gw + j in worst:
+                        p.setPen(QPen(QColor("#c0392b"), 2))
+                        p.drawRect(r.adjusted(1, 1, -1, -1))
+                    if sx > fm.horizontalAdvance("00.0") + 4 and sy > fm.height():
+                        p.setPen(QColor("#333333"))
+                        v = sig[i, j]
+                        p.drawText(r, Qt.AlignmentFlag.AlignCenter, f"{v:.1f}" if v < 100 else f"{v:.0f}")
+            p.setPen(QPen(QColor("#333333"), 1))
+            p.setBrush(Qt.BrushStyle.NoBrush)
+            p.drawRect(QRectF(left, top, pw, ph))

@@ -31,7 +31,8 @@ class ExtrinsicsPage(WizardPage):
         gl.addWidget(self.table, 1)
         gl.addWidget(grade_legend())
         ll.addWidget(g, 3)
-        g2 = QGroupBox("Camera poses in the rig frame (= depth camera frame): optical centre, rotation angle")
+        g2 = QGroupBox("Camera poses in the rig frame (= reference camera's frame): optical centre, rotation angle, "
+                       "and their standard errors (±)")
         g2l = QVBoxLayout(g2)
         self.poses = make_table()
         g2l.addWidget(self.poses)
@@ -68,18 +69,27 @@ class ExtrinsicsPage(WizardPage):
         if cal is not None:
             rig = cal.rig
             self.poses.clear()
-            cols = ["camera", "x mm", "y mm", "z mm", "rotation °", "distance mm"]
+            cols = ["camera", "x mm", "y mm", "z mm", "rotation °", "distance mm", "± rot. °", "± transl. mm",
+                    "σ rig px med/worst"]
+            unc = results.uncertainty(cal)
             self.poses.setColumnCount(len(cols))
             self.poses.setHorizontalHeaderLabels(cols)
             self.poses.setRowCount(len(rig.cameras))
             for i, c in enumerate(rig.cameras):
                 ctr = c.center_rig * 1000
                 ang = float(np.degrees(np.linalg.norm(c.rvec)))
-                vals = [c.name + (" (depth)" if c.name == rig.depth_camera else ""), fmt(ctr[0], 1),
-                        fmt(ctr[1], 1), fmt(ctr[2], 1), fmt(ang, 2), fmt(np.linalg.norm(ctr), 1)]
+                u = unc.get(c.name)
+                ref = u is None or u.rotation_deg is None
+                rig_sig = u.summary("rig") if u is not None else None
+                tags = [t for t, on in (("depth", c.name == rig.depth_camera), ("reference", ref)) if on]
+                vals = [c.name + (f" ({', '.join(tags)})" if tags else ""),
+                        fmt(ctr[0], 1), fmt(ctr[1], 1), fmt(ctr[2], 1), fmt(ang, 2), fmt(np.linalg.norm(ctr), 1),
+                        "–" if ref else f"{u.rotation_deg:.3f}", "–" if ref else f"{u.translation_mm:.2f}",
+                        f"{rig_sig[0]:.2f} / {rig_sig[1]:.2f}" if rig_sig else "–"]
                 for j, v in enumerate(vals):
                     self.poses.setItem(i, j, item(v, bold=(j == 0)))
-            self.poses.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+            self.poses.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+            self.poses.horizontalHeader().setStretchLastSection(True)
             self.poses.resizeRowsToContents()
             h = self.poses.horizontalHeader().height() + sum(self.poses.rowHeight(i) for i in range(len(rig.cameras)))
             self.poses.setFixedHeight(h + 2 * self.poses.frameWidth() + 2)

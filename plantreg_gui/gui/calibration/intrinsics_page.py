@@ -7,7 +7,7 @@ from PySide6.QtWidgets import QHBoxLayout, QHeaderView, QLabel, QPushButton, QSp
 
 from . import results
 from .page import WizardPage
-from .charts import PerViewChart
+from .charts import PerViewChart, UncertaintyMap
 from .widgets import banner, fmt, grade_colour, item, make_table, set_banner
 
 
@@ -25,16 +25,27 @@ class IntrinsicsPage(WizardPage):
         split.addWidget(self.table)
         self.chart = PerViewChart()
         self.chart.bar_clicked.connect(self._bar)
-        split.addWidget(self.chart)
+        lower = QSplitter(Qt.Orientation.Horizontal)
+        lower.addWidget(self.chart)
+        self.umap = UncertaintyMap()
+        self.umap.setToolTip("Projection uncertainty over each camera's image (px, at the working distance): how far "
+                             "a point may project from where the calibration puts it (1 sigma, least certain "
+                             "direction). Green: well within the camera's limit; red: at or beyond it. Hatched: no "
+                             "board corner was seen there. Outlined: where more board views would shrink it most.")
+        lower.addWidget(self.umap)
+        lower.setSizes([700, 450])
+        split.addWidget(lower)
         split.setSizes([200, 560])
         lay.addWidget(split, 1)
         self.worst = QLabel()
         self.worst.setWordWrap(True)
         lay.addWidget(self.worst)
-        hint = QLabel("Each bar is one view's mean reprojection error; orange bars are the views the "
+        hint = QLabel("Left: each bar is one view's mean reprojection error; orange bars are the views the "
                       "calibration flags as weak, hatched grey bars marked ✖ the views you excluded (their error "
                       "with the final model), the dashed line is the camera's mean. Click a bar to "
-                      "inspect that view (page 3) and reject it there.")
+                      "inspect that view (page 3) and reject it there. Right: how uncertain each camera's "
+                      "projection still is (px, 1 sigma); record more board views, tilted, where it is red or "
+                      "outlined. ± values in the table are standard errors.")
         hint.setWordWrap(True)
         hint.setStyleSheet("color: #444444;")
         lay.addWidget(hint)
@@ -80,36 +91,56 @@ class IntrinsicsPage(WizardPage):
         if cal is None:
             self.table.setRowCount(0)
             self.chart.set_data({}, {}, {})
+            self.umap.set_data([])
             self.worst.setText("")
             self._banner()
             return
         if self.model.calibration_stale:
             set_banner(self.message, "The detections or exclusions changed since this calibration: "
                                      "'Recalibrate' to update (or go Next, which recalibrates).")
+        elif results.uncertainty_problems(cal):
+            set_banner(self.message, "⚠ The views do not determine this calibration well enough: "
+                       + " ".join(p + "." for p in results.uncertainty_problems(cal))
+                       + " Saving it needs your explicit confirmation.", error=True)
         else:
             set_banner(self.message, "")
         rows = results.intrinsic_rows(cal, self.model.report if self.model.report_ready() else None)
-        cols = ["camera", "fx", "fy", "cx", "cy", "distortion (k1 k2 p1 p2 k3 …)", "error px",
-                "error norm.", "views", "weak views"]
+        cols = ["camera", "fx", "fy", "cx", "cy", "lens model", "distortion (k1 k2 p1 p2 k3 …)",
+                "uncertainty px (median / worst)", "error px", "error norm.", "views", "weak views"]
         self.table.clear()
         self.table.setColumnCount(len(cols))
         self.table.setHorizontalHeaderLabels(cols)
         self.table.setRowCount(len(rows))
+        names = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
         for i, r in enumerate(rows):
-            vals = [r["camera"], fmt(r["fx"]), fmt(r["fy"]), fmt(r["cx"]), fmt(r["cy"]),
+            sd = r["std"]
+            sig = r["sigma"]
+            vals = [r["camera"], results.pm(r["fx"], sd.get("fx")), results.pm(r["fy"], sd.get("fy")),
+                    results.pm(r["cx"], sd.get("cx")), results.pm(r["cy"], sd.get("cy")), r["model"],
                     " ".join(f"{d:+.4f}" for d in r["dist"][:5]) + (" …" if len(r["dist"]) > 5 else ""),
+                    f"{sig[0]:.2f} / {sig[1]:.2f}" if sig else "–",
                     fmt(r["px"], 3), fmt(r["normalized"], 3), str(r["views"]),
                     ", ".join(p.replace("pose_", "") for p in r["weak"]) or "none"]
             for j, v in enumerate(vals):
                 it = item(v, bold=(j == 0))
-                if j in (6, 7):
+                if j in (8, 9):
                     it.setBackground(grade_colour(r["normalized"]))
                 if j == 5:
-                    it.setToolTip("OpenCV distortion coefficients: " + ", ".join(f"{d:.6g}" for d in r["dist"]))
+                    cv = ", ".join(f"{k}: {v:.3f} px" for k, v in r["model_cv"].items() if v is not None)
+                    it.setToolTip(f"Chosen because it {r['model_reason']}." if r["model_reason"].startswith("predicts")
+                                  else r["model_reason"])
+                    if cv:
+                        it.setToolTip(it.toolTip() + "\nError predicting views it was not fitted to: " + cv)
+                if j == 6:
+                    it.setToolTip("OpenCV distortion coefficients ± standard error:\n" + "\n".join(
+                        f"{names[k]} = {results.pm(d, sd.get(names[k]), 6)}" for k, d in enumerate(r["dist"])))
+                if j == 7:
+                    it.setToolTip("Projection uncertainty over the image at the working distance (1 sigma, px): "
+                                  "median and worst; see the heat map")
                 self.table.setItem(i, j, it)
         hh = self.table.horizontalHeader()
         hh.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
-        hh.setSectionResizeMode(5, QHeaderView.ResizeMode.Stretch)
+        hh.setSectionResizeMode(6, QHeaderView.ResizeMode.Stretch)
         self.table.resizeRowsToContents()
         h = self.table.horizontalHeader().height() + sum(self.table.rowHeight(i) for i in range(len(rows)))
         h += 2 * self.table.frameWidth() + 2
@@ -121,6 +152,7 @@ class IntrinsicsPage(WizardPage):
         ex = results.excluded_px(cal, self.model.excluded, self.model.detections)
         per_view = {c: {p: v for p, v in pv.items() if p not in ex.get(c, {})} for c, pv in per_view.items()}
         self.chart.set_data(per_view, weak, mean, excluded=ex)
+        self.umap.set_data(results.uncertainty_maps(cal))
         # mrcal-style: the worst views first, across cameras (on the normalised error)
         norm = {n: float(c.normalization) for n, c in cal.intrinsics.items()}
         worst = sorted(((px * norm[c], c, p, px) for c, v in per_view.items() for p, px in v.items()), reverse=True)[:6]

@@ -17,7 +17,9 @@ def camera_names(cal, session) -> list[str]:
 
 
 def intrinsic_rows(cal, report=None) -> list[dict[str, Any]]:
-    """Per camera: fx, fy, cx, cy, dist, px (mean corner distance), normalized, views, weak."""
+    """Per camera: fx, fy, cx, cy, dist, px (mean corner distance), normalized, views, weak, std
+    (parameter -> standard error), sigma (median, worst projection uncertainty px), model (label),
+    model_reason, model_cv (candidate -> cross-validated px)."""
     rows = []
     intr_tab = _get(report, "intrinsic") if report is not None else None
     for name, c in cal.intrinsics.items():
@@ -27,10 +29,16 @@ def intrinsic_rows(cal, report=None) -> list[dict[str, Any]]:
         if isinstance(intr_tab, dict) and isinstance(intr_tab.get(name), dict):
             px = float(intr_tab[name].get("px", px))
             nn = float(intr_tab[name].get("normalized", nn))
+        u = uncertainty(cal).get(name)
+        lm = c.lens_model_dict() if hasattr(c, "lens_model_dict") else {}
         rows.append({"camera": name, "fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
                      "cy": float(K[1, 2]), "dist": [float(d) for d in np.ravel(c.dist)], "px": px,
                      "normalized": nn, "rms": float(c.rms_px), "views": int(c.n_views or len(c.per_view_px)),
-                     "weak": [p for p, _e, _r in c.weak_views]})
+                     "weak": [p for p, _e, _r in c.weak_views],
+                     "std": dict(u.std) if u is not None else {},
+                     "sigma": u.summary("intrinsics") if u is not None else None,
+                     "model": lm.get("label", lm.get("model", "")), "model_reason": lm.get("reason", ""),
+                     "model_cv": lm.get("cv_rms_px", {})})
     return rows
 
 
@@ -159,3 +167,38 @@ def depth_views(report) -> tuple[list[tuple[str, dict]], list[tuple[str, str]]]:
         return -max(vals) if vals else 0.0
 
     return sorted(rows.items(), key=worst), pairs
+
+
+def uncertainty(cal) -> dict[str, Any]:
+    """camera -> the calibration's :class:`~plantreg_gui.core.calibration.uncertainty.CameraUncertainty` ({} if none)."""
+    return dict(getattr(cal, "uncertainty", {}) or {}) if cal is not None else {}
+
+
+def uncertainty_problems(cal) -> list[str]:
+    """The limits the calibration exceeds (one sentence each); [] if none or not calibrated."""
+    return list(cal.uncertainty_problems()) if cal is not None and hasattr(cal, "uncertainty_problems") else []
+
+
+def pm(value: float, std: float | None, digits: int = 2) -> str:
+    """``value ± std`` (``value (fixed)`` for a held parameter, just the value without a std)."""
+    if std is None or not math.isfinite(std):
+        return f"{value:.{digits}f}"
+    if std == 0:
+        return f"{value:.{digits}f} (fixed)"
+    return f"{value:.{digits}f} ± {std:.{digits}f}"
+
+
+def uncertainty_maps(cal) -> list[dict[str, Any]]:
+    """Per camera, what the heat map draws: sigma grid (px), corners per cell, the camera's limit
+    (median limit, px), the image aspect and a title with the summary and where to add views."""
+    from ...core.calibration.uncertainty import limits_px
+
+    out = []
+    for name, u in uncertainty(cal).items():
+        med, worst = u.summary("intrinsics")
+        lim = limits_px(u)[0]
+        title = (f"{name}: σ median {med:.2f}, worst {worst:.2f} px (limit {lim:.2f})\n"
+                 f"add views: {', '.join(u.add_views)}")
+        out.append({"camera": name, "sigma": u.sigma_intrinsics, "corners": u.corners, "limit": lim,
+                    "aspect": u.width / max(u.height, 1), "title": title})
+    return out

@@ -1,4 +1,8 @@
-"""Page 1: rig and board — open or create a capture session, cameras, depth camera, board."""
+"""Page 1: rig and board — open or create a capture session, cameras, depth camera, board.
+
+Length: the rig and board form, its live board preview and the session-contents summary are one
+page a technician fills in together; the parsing helpers (bands) sit at the top.
+"""
 
 from __future__ import annotations
 
@@ -80,8 +84,14 @@ class RigPage(WizardPage):
         # --- cameras
         cbox = QGroupBox("Cameras")
         cl = QVBoxLayout(cbox)
-        self.cameras = QTableWidget(0, 4)
-        self.cameras.setHorizontalHeaderLabels(["Name (= file name)", "Modality", "Units", "Bands (nm)"])
+        self.cameras = QTableWidget(0, 5)
+        self.cameras.setHorizontalHeaderLabels(["Name (= file name)", "Modality", "Units", "Bands (nm)",
+                                                "Lens file"])
+        self.cameras.horizontalHeaderItem(4).setToolTip(
+            "Optional: a rig file (e.g. this camera calibrated on its own, or the maker's values) whose K and "
+            "distortion this camera keeps; only its pose is calibrated. With standard errors in the file (a "
+            "plantreg calibration) they are priors. Double-click to type the path (relative to the session "
+            "folder or absolute); empty = calibrate the lens here")
         self.cameras.horizontalHeaderItem(2).setToolTip("What a pixel value means, e.g. degC, DN, reflectance "
                                                         "(kept in the rig file)")
         self.cameras.horizontalHeaderItem(3).setToolTip("Band centres of a multi-band camera in nm: a list "
@@ -89,7 +99,7 @@ class RigPage(WizardPage):
                                                         "'400-1000/100' (kept in the rig file; the registration "
                                                         "shows spectra in nm with it)")
         self.cameras.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
-        for col in (2, 3):  # units and bands take what they need; name and modality share the rest
+        for col in (2, 3, 4):  # units, bands, lens file take what they need; name and modality share the rest
             self.cameras.horizontalHeader().setSectionResizeMode(col, QHeaderView.ResizeMode.ResizeToContents)
         self.cameras.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.cameras.itemChanged.connect(self._changed)
@@ -211,12 +221,13 @@ class RigPage(WizardPage):
         self._refresh_depth_combo("ir")
         self._changed()
 
-    def _add_camera(self, name: str, modality: str, units: str = "", bands: str = "") -> None:
+    def _add_camera(self, name: str, modality: str, units: str = "", bands: str = "", intrinsics: str = "") -> None:
         r = self.cameras.rowCount()
         self.cameras.insertRow(r)
         self.cameras.setItem(r, 0, QTableWidgetItem(name))
         self.cameras.setItem(r, 2, QTableWidgetItem(units))
         self.cameras.setItem(r, 3, QTableWidgetItem(bands))
+        self.cameras.setItem(r, 4, QTableWidgetItem(intrinsics))
         combo = QComboBox()
         combo.setEditable(True)
         combo.addItems(MODALITIES)
@@ -262,7 +273,7 @@ class RigPage(WizardPage):
         self.cameras.setRowCount(0)
         for n, m in s.cameras.items():
             meta = s.camera_meta.get(n, {})
-            self._add_camera(n, m, meta.get("units", ""), format_bands(meta.get("bands")))
+            self._add_camera(n, m, meta.get("units", ""), format_bands(meta.get("bands")), meta.get("intrinsics", ""))
         b = s.board
         self.btype.setCurrentText(b.type)
         self.columns.setValue(b.columns)
@@ -332,7 +343,8 @@ class RigPage(WizardPage):
         return board, cams, depth, self.depth_scale.value(), problems
 
     def camera_meta(self) -> tuple[dict[str, dict], list[str]]:
-        """Units and bands per camera from the table ({name: {"units", "bands"}}), and problems."""
+        """Units, bands and known intrinsics per camera from the table ({name: {"units", "bands",
+        "intrinsics"}}), and problems."""
         meta: dict[str, dict] = {}
         problems: list[str] = []
         for r, n in enumerate(self._camera_names()):
@@ -341,6 +353,12 @@ class RigPage(WizardPage):
             text = self.cameras.item(r, 3).text().strip() if self.cameras.item(r, 3) else ""
             if units:
                 m["units"] = units
+            intr = self.cameras.item(r, 4).text().strip() if self.cameras.item(r, 4) else ""
+            if intr:
+                base = Path(self.model.session.folder) if self.model.session is not None else Path.cwd()
+                if not (Path(intr) if Path(intr).is_absolute() else base / intr).is_file():
+                    problems.append(f"camera '{n}': known intrinsics file not found: {intr}")
+                m["intrinsics"] = intr
             known = (self.model.session.camera_meta.get(n, {}).get("bands")
                      if self.model.session is not None else None)
             if text and known and text == format_bands(known):

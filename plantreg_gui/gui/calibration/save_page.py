@@ -1,4 +1,8 @@
-"""Page 7: save — ROI editor over a depth map, then the rig file, the report JSON and CSV tables."""
+"""Page 7: save — ROI editor over a depth map, then the rig file, the report JSON and CSV tables.
+
+Length: the ROI editor with its depth-map preview and fit, the file choice and the save with its
+two confirmations (replacing files, an uncertain calibration) are one page.
+"""
 
 from __future__ import annotations
 
@@ -11,6 +15,7 @@ from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QFileDialog, QFormLayo
                                QGroupBox, QHBoxLayout, QLabel, QLineEdit, QMessageBox, QPushButton,
                                QSizePolicy, QVBoxLayout)
 
+from . import results
 from .page import WizardPage
 from .widgets import banner, qpixmap, set_banner
 
@@ -481,6 +486,28 @@ class SavePage(WizardPage):
                 set_banner(self.message, "Not saved: choose other file names, or save again and confirm.")
                 return
             self._confirmed.update(str(p) for p in existing)
+        # a calibration beyond the uncertainty limits is saved only on explicit confirmation, and
+        # then flagged in the rig's provenance and the report (as `plantreg calibrate --accept-uncertain`)
+        cal = self.model.calibration
+        problems = results.uncertainty_problems(cal)
+        if problems and list(getattr(cal, "accepted_uncertain", [])) != problems:
+            box = QMessageBox(QMessageBox.Icon.Warning, "Calibration too uncertain",
+                              "The board views do not determine this calibration well enough:\n\n• "
+                              + "\n• ".join(problems)
+                              + "\n\nBetter: go back, record the board views named above and recalibrate. "
+                                "Save it anyway? The rig file and the report will say it was kept although "
+                                "uncertain.", QMessageBox.StandardButton.NoButton, self)
+            keep = box.addButton("Save anyway (flagged as uncertain)", QMessageBox.ButtonRole.AcceptRole)
+            box.addButton("Don't save", QMessageBox.ButtonRole.RejectRole)
+            box.setDefaultButton(box.buttons()[-1])
+            box.exec()
+            if box.clickedButton() is not keep:
+                set_banner(self.message, "Not saved: the calibration is too uncertain (see the Intrinsics and "
+                                         "Extrinsics pages for where to add views).", error=True)
+                return
+            cal.accepted_uncertain = list(problems)
+            if self.model.report is not None:
+                self.model.report.accepted_uncertain = list(problems)
         self.actions.save_outputs(rig_path, rep_path, lo, hi)
 
     def saved(self, paths: dict[str, str]) -> None:
