@@ -55,7 +55,7 @@ from .board import Board
 FOUND, FAILED, MISSING = "found", "failed", "missing"
 #: Changes whenever detection can give other results for the same image and options: cached
 #: detections (``detections.json``, :class:`DetectionCache`) of another version are detected again.
-DETECT_VERSION = 2
+DETECT_VERSION = 3
 DETECTORS = ("auto", "classic")
 
 
@@ -558,9 +558,10 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         if variant not in tried:
             tried.append(variant)
         s = s0 * zoom
-        # classic first only on the plain image: on a faint flattened board its quads (and so its
-        # corners) are several px off, beyond what cornerSubPix can pull back
-        c, how = _find_any(img, board.pattern_size, thorough, sb_first=s > 1.0 or variant != "plain")
+        # SB first everywhere: classic corners, even settled and refined, left the OpenCV stereo
+        # sample's relative pose 0.17 deg from Bouguet's (SB's: 0.007 deg); on a faint flattened
+        # board classic quads are several px off, beyond what cornerSubPix can pull back
+        c, how = _find_any(img, board.pattern_size, thorough, sb_first=True)
         if c is None or not _saddles_ok(hp_w, c, board):
             continue
         perm = canonical_permutation(c, img if variant != "clahe" else plain_w, board, inverted)
@@ -1005,6 +1006,12 @@ class DetectionCache:
         """Write the file atomically if anything changed; False when the folder is not writable."""
         if not self.dirty:
             return True
+        folder = self.path.parent
+        try:  # a folder without write bits stays untouched, also for root (who may write anyway)
+            if not folder.stat().st_mode & 0o222:
+                return False
+        except OSError:
+            return False
         known = {f"{p.name}:{c}" for p in self.session.poses for c in p.images}
         images = {k: v for k, v in sorted(self.entries.items()) if k in known}
         try:
