@@ -496,7 +496,8 @@ def test_load_demo_writes_only_the_calibration_session(qtbot, demo_dir, tmp_path
             got.pop("review", None)
             want.pop("review", None)
             assert got == want, name
-        assert sorted(p.name for p in session.iterdir()) == sorted(p.name for p in ref.iterdir())
+        derived = {"detections.json"}  # the detection cache a calibration of the reference left
+        assert sorted(p.name for p in session.iterdir()) == sorted(p.name for p in ref.iterdir() if p.name not in derived)
         from plantreg_gui.core.io.imageio import read_image
 
         np.testing.assert_array_equal(read_image(session / "pose_03" / "ir.png"), read_image(ref / "pose_03" / "ir.png"))

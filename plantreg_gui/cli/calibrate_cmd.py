@@ -157,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
     for w in report.warnings:
         print(f"warning: {w}", file=sys.stderr)
     max_rms = MAX_RMS_PX if args.max_rms is None else args.max_rms
-    problems = quality_problems(cal, max_rms)
+    problems = quality_problems(cal, max_rms, report)
     if problems:
         raise InputError(f"calibration failed, nothing written: {'; '.join(problems)}. Check the board's columns "
                          f"and rows (inner corners: {session.board.columns}x{session.board.rows} now) and square size, "

@@ -371,11 +371,18 @@ def _too_few_message(session: Session, cam: str, views: dict[str, Detection],
     return msg
 
 
-def quality_problems(cal: "Calibration", max_rms_px: float = MAX_RMS_PX) -> list[str]:
+def quality_problems(cal: "Calibration", max_rms_px: float = MAX_RMS_PX, report=None) -> list[str]:
     """Why ``cal`` has clearly failed (empty list: it has not): RMS errors above ``max_rms_px``
-    (joint and per camera), or a calibrated camera outside the rig sanity bounds
-    (:mod:`plantreg_gui.core.validate`). Each item is one sentence with the numbers."""
+    (joint and per camera), a camera pair's epipolar error (``report.extrinsic``) above it -- each
+    camera fits its own views, but the cameras disagree where the corners are (a stated board
+    smaller than the real one, found at different offsets) -- or a calibrated camera outside the
+    rig sanity bounds (:mod:`plantreg_gui.core.validate`). Each item is one sentence with the numbers."""
     out = []
+    for o, row in (getattr(report, "extrinsic", None) or {}).items():
+        for t, cell in (row or {}).items():
+            if cell and o < t and not cell["px"] <= max_rms_px:
+                out.append(f"cameras '{o}' and '{t}' disagree: epipolar error {cell['px']:.2f} px exceeds "
+                           f"{max_rms_px:g} px")
     if not np.isfinite(cal.joint_rms_px) or cal.joint_rms_px > max_rms_px:
         out.append(f"joint RMS reprojection error {cal.joint_rms_px:.2f} px exceeds {max_rms_px:g} px")
     for name, c in cal.intrinsics.items():
