@@ -876,10 +876,15 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
             else:  # cancelled, an error, or the consumer stopped: no worker may go on
                 procs = list(getattr(pool, "_processes", {}).values())
                 pool.shutdown(wait=False, cancel_futures=True)
+                # a worker may have been started while shutting down: take the list again
+                procs += [p for p in (getattr(pool, "_processes", None) or {}).values() if p not in procs]
                 for proc in procs:
                     proc.terminate()
                 for proc in procs:
                     proc.join(2.0)
+                    if proc.is_alive():  # still starting up (spawn) or stuck in native code
+                        proc.kill()
+                        proc.join(2.0)
         ok = True
     finally:
         if cache is not None:
