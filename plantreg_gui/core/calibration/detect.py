@@ -160,6 +160,10 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
             done += 1
             progress(done / n, f"{key[0]}/{key[1]}: cached")
             yield hit, None
+        elif session.pose(key[0]).images.get(key[1]) is None:  # no image: nothing for a worker to do
+            done += 1
+            progress(done / n, f"{key[0]}/{key[1]}: missing")
+            yield detect_view(session, session.pose(key[0]), key[1], opts.get(key)), None
         else:
             work.append((key, hit, k))
     try:

@@ -30,6 +30,8 @@ GREY_SPREAD = 12.0
 #: ... and an unknown palette (colours along one line) only when they are this saturated; a
 #: photograph's colours are less so and it is read by its luma
 PALETTE_SPREAD = 40.0
+#: colours sampled for the quick "on no palette" test before the full one
+PRECHECK_SAMPLES = 400
 #: :func:`flatten` stretches local contrast up to this many times the image's median local
 #: contrast (the board's checker stands out, the background's noise does not)
 FLAT_NOISE_FLOOR = 3.0
@@ -78,22 +80,30 @@ def to_scalar(image: np.ndarray) -> tuple[np.ndarray, str]:
         return img.astype(np.float32), kind
     if img.shape[2] not in (3, 4):  # hyperspectral: the band mean has the best SNR for a grey board
         return np.nanmean(img.astype(np.float32), axis=2), "band mean"
+    h, w = img.shape[:2]
     if img.dtype == np.uint8:  # the common case: decide on a sample before converting everything
-        small = np.ascontiguousarray(img[:: max(1, img.shape[0] // 64), :: max(1, img.shape[1] // 64), :3])
+        small = np.ascontiguousarray(img[:: max(1, h // 64), :: max(1, w // 64), :3])
         spread = small.max(2).astype(np.int16) - small.min(2)
         if np.median(spread) < GREY_SPREAD:
-            return cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_RGB2GRAY).astype(np.float32), "grey"
-    rgb = img[:, :, :3].astype(np.float32)
-    if img.dtype != np.uint8:
-        top = 65535.0 if img.dtype == np.uint16 else max(float(np.nanmax(rgb)), 1e-12)
-        rgb = rgb * (255.0 / top)
-    luma = rgb @ np.array([0.299, 0.587, 0.114], np.float32)
-    flat = rgb.reshape(-1, 3)
-    rng = np.random.default_rng(0)
-    sample = flat[rng.integers(0, len(flat), min(len(flat), 4000))]
+            return _luma8(img), "grey"
+        top = 255.0
+    else:
+        top = 65535.0 if img.dtype == np.uint16 else max(float(np.nanmax(img[:, :, :3])), 1e-12)
+    i = np.random.default_rng(0).integers(0, h * w, min(h * w, 4000))
+    sample = img[i // w, i % w, :3].astype(np.float32) * np.float32(255.0 / top)
     sample = sample[np.all(np.isfinite(sample), axis=1)]
+
+    def rgb() -> np.ndarray:
+        a = img[:, :, :3].astype(np.float32)
+        return a if top == 255.0 else a * np.float32(255.0 / top)
+
+    def luma() -> np.ndarray:
+        return _luma8(img) if img.dtype == np.uint8 else rgb() @ np.array([0.299, 0.587, 0.114], np.float32)
+
     if len(sample) == 0 or np.median(sample.max(1) - sample.min(1)) < GREY_SPREAD:
-        return luma, "grey"
+        return luma(), "grey"
+    if _far_from_palettes(sample[:: max(1, len(sample) // PRECHECK_SAMPLES)]):
+        return _luma_or_pc1(rgb, luma, sample)
     best, best_d = None, np.inf
     for name, lut in _palettes().items():
         d = float(np.median(_palette_index(sample, lut)[1]))
@@ -101,18 +111,44 @@ def to_scalar(image: np.ndarray) -> tuple[np.ndarray, str]:
             best, best_d = name, d
     if best_d < PALETTE_TOL:
         # map the image's distinct colours (a palette image has few) instead of every pixel
+        flat = rgb().reshape(-1, 3)
         packed = np.round(np.clip(flat, 0, 255)).astype(np.int32) @ np.array([65536, 256, 1], np.int32)
         uniq, inv = np.unique(packed, return_inverse=True)
         cols = np.stack([uniq >> 16, (uniq >> 8) & 255, uniq & 255], 1).astype(np.float32)
         idx = _palette_index(cols, _palettes()[best])[0].astype(np.float32)
         return idx[inv.ravel()].reshape(img.shape[:2]), f"palette {best}"
+    return _luma_or_pc1(rgb, luma, sample)
+
+
+def _luma8(img: np.ndarray) -> np.ndarray:
+    """8-bit RGB(A) (H, W, 3|4) -> its luma, float32 (H, W)."""
+    return cv2.cvtColor(np.ascontiguousarray(img[:, :, :3]), cv2.COLOR_RGB2GRAY).astype(np.float32)
+
+
+def _far_from_palettes(sample: np.ndarray) -> bool:
+    """Whether colours (N, 3) are clearly on no known palette: the median distance to every
+    palette above twice :data:`PALETTE_TOL` on a small sample (a photograph; spares the full test,
+    which builds a search tree per palette)."""
+    s2 = np.sum(sample.astype(np.float64) ** 2, axis=1)[:, None]
+    for lut in _palettes().values():
+        lut = lut.astype(np.float64)
+        d2 = np.min(s2 - 2.0 * sample @ lut.T + np.sum(lut**2, axis=1)[None, :], axis=1)
+        if float(np.median(d2)) < (2.0 * PALETTE_TOL) ** 2:
+            return False
+    return True
+
+
+def _luma_or_pc1(rgb, luma, sample: np.ndarray) -> tuple[np.ndarray, str]:
+    """A colour image on no known palette: the first principal component of strongly coloured
+    images whose colours lie along one line ("colour PC1"), else the luma. ``rgb``, ``luma``:
+    functions making the image's float RGB (H, W, 3) and luma (H, W)."""
     centred = sample - sample.mean(0)
     _, sv, vt = np.linalg.svd(centred, full_matrices=False)
     saturated = np.median(sample.max(1) - sample.min(1)) > PALETTE_SPREAD
     if saturated and sv[0] ** 2 > 0.9 * float(np.sum(sv**2)):  # colours along one line: its coordinate
         axis = vt[0] if vt[0] @ np.array([0.299, 0.587, 0.114]) >= 0 else -vt[0]
-        return (rgb @ axis.astype(np.float32)).astype(np.float32), "colour PC1"
-    return luma, "luma"
+        return (rgb() @ axis.astype(np.float32)).astype(np.float32), "colour PC1"
+    return luma(), "luma"
 
 
 def _stretch(f: np.ndarray, lo_pct: float = 0.5, hi_pct: float = 99.5) -> np.ndarray:
@@ -166,8 +202,10 @@ def to_gray(image: np.ndarray, enhance: bool = False) -> np.ndarray:
 
 
 #: Detection runs on an image whose longer side is at most this (corners are then refined at
-#: full resolution) and at least :data:`MIN_SIDE` (tiny thermal images are upscaled first).
-WORK_SIDE = 1280
+#: full resolution) and at least :data:`MIN_SIDE` (tiny thermal images are upscaled first). The
+#: SB detector's time grows with the image's area; the corners it finds at this size refine at
+#: full resolution to the same saddle points as those found at full size.
+WORK_SIDE = 640
 MIN_SIDE = 480
 
 def work_scale(size: tuple[int, int]) -> float:

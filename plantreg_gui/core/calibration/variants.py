@@ -13,9 +13,14 @@ import numpy as np
 from ..camera import modality as _modality
 from .board import Board
 from .corners import (_find_any, _find_chessboard, _find_classic, _saddles_ok, _settle_classic, canonical_order,
-                      canonical_permutation, refine_corners)
+                      canonical_permutation, min_spacing, refine_corners)
 from .detection import FAILED, FOUND, Detection, DetectOptions
 from .imageprep import WORK_SIDE, _resize, _stretch, _to_image_px, flatten, to_gray, to_scalar, work_scale
+
+
+#: A board found in a downscaled image whose corners are closer than this (px, there) is detected
+#: again at a larger scale: below it the SB detector may take the board's edge for corners.
+MIN_SPACING_PX = 12.0
 
 
 def _square_px(size: tuple[int, int], board: Board) -> float:
@@ -46,22 +51,41 @@ def _variant_images(f: np.ndarray, board: Board, enhance: bool):
     yield "thorough", made["flat"], True, 1.0
 
 
+def _highpass(f: np.ndarray, sigma: float) -> np.ndarray:
+    """``f`` minus its Gaussian blur of ``sigma`` px; a wide blur is taken on a copy shrunk by up
+    to sigma / 2 (what it keeps varies slowly) and enlarged again."""
+    f = np.asarray(f, np.float32)
+    k = int(max(1, sigma // 2))
+    if k < 2:
+        return f - cv2.GaussianBlur(f, (0, 0), sigma)
+    h, w = f.shape
+    small = cv2.resize(f, (max(1, w // k), max(1, h // k)), interpolation=cv2.INTER_AREA)
+    low = cv2.resize(cv2.GaussianBlur(small, (0, 0), sigma / k), (w, h), interpolation=cv2.INTER_LINEAR)
+    return f - low
+
+
 def _flat_like(f: np.ndarray, variant: str, board: Board) -> np.ndarray:
     """The full-resolution image of a flattened ``variant`` (its sigma in full-size pixels)."""
     sq = _square_px((f.shape[1], f.shape[0]), board)
     return flatten(f, max(2.0, sq / 2.0) if variant != "flat-fine" else max(1.5, sq / 4.0))
 
 
-def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted: bool):
-    """The automatic variants on a scalar image ``f`` (H, W). Returns (corners (N, 2) in board
-    order in image px, variant, scale) or (None, tried variants, scale)."""
+def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted: bool, scale: float | None = None):
+    """The automatic variants on a scalar image ``f`` (H, W) at the working scale (``scale``, or
+    :func:`~.imageprep.work_scale`). Returns (corners (N, 2) in board order in image px, variant,
+    scale) or (None, tried variants, scale)."""
     size = (f.shape[1], f.shape[0])
-    s = work_scale(size)
+    s = work_scale(size) if scale is None else scale
     fw = _resize(f, s)
     plain_w = _stretch(fw)
     # the saddle check runs on a linear image without the lamp's gradient (the flattened ones
-    # make a board's dark surround look like squares)
-    hp_w = fw - cv2.GaussianBlur(fw.astype(np.float32), (0, 0), max(2.0, _square_px((fw.shape[1], fw.shape[0]), board)))
+    # make a board's dark surround look like squares); made when a board is first found
+    hp: list[np.ndarray] = []
+
+    def hp_w() -> np.ndarray:
+        if not hp:
+            hp.append(_highpass(fw, max(2.0, _square_px((fw.shape[1], fw.shape[0]), board))))
+        return hp[0]
     tried = []
     s0 = s
     for variant, img, thorough, zoom in _variant_images(fw, board, enhance):
@@ -72,7 +96,7 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         # sample's relative pose 0.17 deg from Bouguet's (SB's: 0.007 deg); on a faint flattened
         # board classic quads are several px off, beyond what cornerSubPix can pull back
         c, how = _find_any(img, board.pattern_size, thorough, sb_first=True)
-        if c is None or not _saddles_ok(hp_w, c, board):
+        if c is None or not _saddles_ok(hp_w(), c, board):
             continue
         perm = canonical_permutation(c, img if variant != "clahe" else plain_w, board, inverted)
         # refined on the image that found them: on rendered lamp-heated boards with known truth the
@@ -85,6 +109,13 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
                 if how != "sb" or not _saddles_ok(img, c, board):
                     continue
                 perm = canonical_permutation(c, img if variant != "clahe" else plain_w, board, inverted)
+        if s < 1.0 and scale is None and (sp := min_spacing(c, board)) < MIN_SPACING_PX:
+            # a small or steep board in a downscaled image: the SB detector can take its edge for
+            # a row of corners; detect again around it, at a scale where its squares are large enough
+            again = _detect_around(f, _to_image_px(c, s), board, enhance, inverted,
+                                   min(1.0, 1.5 * MIN_SPACING_PX * s / sp))
+            if again[0] is not None:
+                return again
         if s > 1.0:  # upscaled: refine on the upscaled variant image, then back to image px
             c = _to_image_px(refine_corners(img, c, board), s)
         elif s < 1.0:  # downscaled: refine on the full-resolution image (cornerSubPix needs no stretch)
@@ -108,6 +139,20 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
                 c = c if c2 is None else c2
             return refine_corners(img, c, board)[perm], "full-res", 1.0
     return None, tried, s
+
+
+def _detect_around(f: np.ndarray, corners: np.ndarray, board: Board, enhance: bool, inverted: bool, scale: float):
+    """:func:`_detect_chessboard_auto` at ``scale`` on the part of ``f`` around ``corners`` (N, 2)
+    (image px; their box grown by half its size each way: the board's outer squares, even when
+    the corners found first were a row off); the result in image px."""
+    lo, hi = corners.min(0), corners.max(0)
+    m = 0.5 * float(np.max(hi - lo))
+    x0, y0 = (max(0, int(v - m)) for v in lo)
+    x1, y1 = min(f.shape[1], int(hi[0] + m) + 1), min(f.shape[0], int(hi[1] + m) + 1)
+    c, variant, s = _detect_chessboard_auto(f[y0:y1, x0:x1], board, enhance, inverted, scale)
+    if c is None:
+        return c, variant, s
+    return (c + np.array([x0, y0], np.float32)).astype(np.float32), variant, s
 
 
 def _detect_charuco(gray: np.ndarray, board: Board):
