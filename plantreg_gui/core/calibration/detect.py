@@ -1043,11 +1043,9 @@ class DetectionCache:
         """Write the file atomically if anything changed; False when the folder is not writable."""
         if not self.dirty:
             return True
-        folder = self.path.parent
-        try:  # a folder without write bits stays untouched, also for root (who may write anyway)
-            if not folder.stat().st_mode & 0o222:
-                return False
-        except OSError:
+        from .session import has_write_bits
+
+        if not has_write_bits(self.path.parent):  # untouched, also for root (who may write anyway)
             return False
         known = {f"{p.name}:{c}" for p in self.session.poses for c in p.images}
         images = {k: v for k, v in sorted(self.entries.items()) if k in known}

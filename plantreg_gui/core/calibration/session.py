@@ -72,6 +72,15 @@ class Pose:
         return paths[0].parent if paths else None
 
 
+def has_write_bits(folder: Path) -> bool:
+    """Whether ``folder`` has any write bit set (False when it cannot be examined). A folder the
+    user made read-only is left untouched also by root."""
+    try:
+        return bool(Path(folder).stat().st_mode & 0o222)
+    except OSError:
+        return False
+
+
 def view_key(pose: str, camera: str) -> str:
     """``"POSE:CAMERA"``, the key of one image in ``review`` and on the command line."""
     return f"{pose}:{camera}"
@@ -279,6 +288,12 @@ class Session:
         for k, v in self.extra.items():
             d.setdefault(k, v)
         return d
+
+    def writable(self) -> bool:
+        """Whether the session folder may be written without being asked: it has write bits
+        (also for root, who may write anyway). Derived files (``detections.json``) and the
+        wizard's review state follow this; an explicit save does not ask."""
+        return has_write_bits(self.folder)
 
     def save(self) -> None:
         """Write ``session.json`` atomically (board, cameras, depth, review)."""
