@@ -48,7 +48,7 @@ import numpy as np
 
 from ..camera import modality as _modality
 from ..errors import InputError, PlantregError
-from ..io.imageio import atomic_write_text, read_image
+from ..io.imageio import atomic_write_text, has_write_bits, read_image
 from ..progress import Reporter, ensure_reporter
 from .board import Board
 
@@ -1044,8 +1044,6 @@ class DetectionCache:
         """Write the file atomically if anything changed; False when the folder is not writable."""
         if not self.dirty:
             return True
-        from .session import has_write_bits
-
         if not has_write_bits(self.path.parent):  # untouched, also for root (who may write anyway)
             return False
         known = {f"{p.name}:{c}" for p in self.session.poses for c in p.images}

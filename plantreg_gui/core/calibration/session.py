@@ -25,7 +25,7 @@ from typing import Any
 
 from ..camera import modality
 from ..errors import InputError
-from ..io.imageio import IMAGE_SUFFIXES, atomic_write_text, read_json
+from ..io.imageio import IMAGE_SUFFIXES, atomic_write_text, has_write_bits, read_json
 from .board import Board
 
 SESSION_FILE = "session.json"
@@ -70,15 +70,6 @@ class Pose:
     def folder(self) -> Path | None:
         paths = list(self.images.values()) + ([self.depth] if self.depth else [])
         return paths[0].parent if paths else None
-
-
-def has_write_bits(folder: Path) -> bool:
-    """Whether ``folder`` has any write bit set (False when it cannot be examined). A folder the
-    user made read-only is left untouched also by root."""
-    try:
-        return bool(Path(folder).stat().st_mode & 0o222)
-    except OSError:
-        return False
 
 
 def view_key(pose: str, camera: str) -> str:
