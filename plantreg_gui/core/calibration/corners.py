@@ -161,6 +161,30 @@ def _saddles_ok(img: np.ndarray, corners: np.ndarray, board: Board, min_share: f
     return float(saddle.mean()) >= min_share
 
 
+#: a grid whose corner leaves the line of its neighbours by more than this share of their spacing
+#: may have a corner that is not where the detector put it (a glinting foil square pulled SB's
+#: corner onto the board's edge, 60 px away: 0.45-0.95 on the ZED 2i views); correct grids on the
+#: real sets reach 0.37 (a steep hand-held view; the Lepton's k1 = -0.4: 0.30). Only a choice
+#: between two detectors' grids, never a refusal.
+MAX_IRREGULARITY = 0.4
+
+
+def grid_irregularity(corners: np.ndarray, board: Board) -> float:
+    """The largest second difference of the chessboard grid ``corners`` (N, 2) along its rows and
+    columns, relative to the local corner spacing: ~0.1-0.3 for a real lens, ~1 for a corner
+    that sits a square away from its place."""
+    g = np.asarray(corners, np.float64).reshape(board.rows, board.columns, 2)
+    worst = 0.0
+    for a in (0, 1):
+        if g.shape[a] < 3:
+            continue
+        gg = np.moveaxis(g, a, 0)
+        d2 = np.linalg.norm(gg[:-2] - 2 * gg[1:-1] + gg[2:], axis=-1)
+        span = np.linalg.norm(gg[2:] - gg[:-2], axis=-1) / 2.0
+        worst = max(worst, float(np.max(d2 / np.maximum(span, 1e-9))))
+    return worst
+
+
 def _settle_classic(img: np.ndarray, corners: np.ndarray, board: Board) -> np.ndarray | None:
     """The classic detector's corners (the quads' corners, ~1 px off) moved onto the saddle
     points; None when one would move further than a fifth of the corner spacing (at least 2 px):

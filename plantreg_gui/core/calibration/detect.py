@@ -23,9 +23,10 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, PlantregError
-from ..io.imageio import atomic_write_text, read_image
+from ..io.imageio import atomic_write_text, has_write_bits, read_image
 from ..progress import Reporter, ensure_reporter
-from .corners import canonical_order, canonical_permutation, refine_corners  # noqa: F401  (re-exported)
+from .corners import (MAX_IRREGULARITY, canonical_order, canonical_permutation,  # noqa: F401  (re-exported)
+                      grid_irregularity, refine_corners)
 from .detection import (DETECT_VERSION, DETECTORS, FAILED, FOUND, MISSING, VARIANT_TEXT, VARIANTS,  # noqa: F401
                         Detection, DetectOptions, check_image_sizes, detection_from_dict, detection_summary,
                         detection_to_dict)
@@ -308,11 +309,7 @@ class DetectionCache:
         """Write the file atomically if anything changed; False when the folder is not writable."""
         if not self.dirty:
             return True
-        folder = self.path.parent
-        try:  # a folder without write bits stays untouched, also for root (who may write anyway)
-            if not folder.stat().st_mode & 0o222:
-                return False
-        except OSError:
+        if not has_write_bits(self.path.parent):  # untouched, also for root (who may write anyway)
             return False
         known = {f"{p.name}:{c}" for p in self.session.poses for c in p.images}
         images = {k: v for k, v in sorted(self.entries.items()) if k in known}

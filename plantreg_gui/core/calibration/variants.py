@@ -12,8 +12,8 @@ import numpy as np
 
 from ..camera import modality as _modality
 from .board import Board
-from .corners import (_find_any, _find_chessboard, _find_classic, _saddles_ok, _settle_classic, canonical_order,
-                      canonical_permutation, min_spacing, refine_corners)
+from .corners import (MAX_IRREGULARITY, _find_any, _find_chessboard, _find_classic, _saddles_ok, _settle_classic,
+                      canonical_order, canonical_permutation, grid_irregularity, min_spacing, refine_corners)
 from .detection import FAILED, FOUND, Detection, DetectOptions
 from .imageprep import WORK_SIDE, _resize, _stretch, _to_image_px, flatten, to_gray, to_scalar, work_scale
 
@@ -98,6 +98,15 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         c, how = _find_any(img, board.pattern_size, thorough, sb_first=True)
         if c is None or not _saddles_ok(hp_w(), c, board):
             continue
+        if how == "sb" and grid_irregularity(c, board) > MAX_IRREGULARITY:
+            # a corner off its grid line: the classic detector's grid when it is the regular one
+            c2, how2 = _find_any(img, board.pattern_size, False)
+            if how2 == "classic" and _saddles_ok(hp_w(), c2, board) \
+                    and grid_irregularity(c2, board) < grid_irregularity(c, board):
+                # settled on the saddle points; on a glinting foil square a free refinement
+                # wanders, then each corner moves only as far as the guard lets it
+                c2s = _settle_classic(img, c2, board)
+                c, how = (c2s if c2s is not None else refine_corners(img, c2, board)), "classic, regular grid"
         perm = canonical_permutation(c, img if variant != "clahe" else plain_w, board, inverted)
         # refined on the image that found them: on rendered lamp-heated boards with known truth the
         # flattened image gives smaller corner errors than the raw scalar (whose lamp gradient
