@@ -20,7 +20,6 @@ from __future__ import annotations
 import errno
 import os
 import shutil
-import signal
 import stat
 import tempfile
 import warnings
@@ -32,6 +31,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, one_line
+from ..jobs import signals
 
 #: Still formats OpenCV decodes besides PNG/JPEG/TIFF (thermal and machine-vision cameras write
 #: 16-bit PGM, 8-bit PPM, BMP): suffix -> (format name, accepted file signatures).
@@ -506,23 +506,6 @@ def _renamed(e: OSError, tmp: Path, final: Path) -> OSError:
 
 
 @contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """Hold SIGINT/SIGTERM/SIGHUP while a few renames move a complete result into place, so
-    that a signal never lands between moving the old result aside and the new one in."""
-    sigs = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
-    import threading
-
-    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
-@contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success move it into place, on error remove it.
 
@@ -661,7 +644,7 @@ def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
         yield tmp
         _publish(tmp, is_dir=True)
-        with _signals_deferred():
+        with signals.deferred():
             if os.path.lexists(out):
                 old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
                 os.replace(out, old / "x")
@@ -713,7 +696,7 @@ def atomic_files(paths: list[str | Path], remove: list[str | Path] = ()) -> Iter
             tmps[p] = Path(t)
         current = None
         yield dict(tmps)
-        with _signals_deferred():
+        with signals.deferred():
             try:
                 for p in finals + stale:
                     current = p

@@ -1,3 +1,4 @@
-"""Running core work in a child process (cancellable, with progress), so that the GIL-holding
-steps of Open3D do not freeze a GUI thread.
+"""Child processes and signals: core work in a child process (cancellable, with progress), so
+that GIL-holding steps do not freeze a GUI thread (:mod:`.process_job`), and the one handling of
+terminating signals for every thread and child process (:mod:`.signals`).
 """
