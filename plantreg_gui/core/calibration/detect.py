@@ -842,9 +842,9 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
                 yield det, thumb
             ok = True
             return
-        import multiprocessing as mp
+        from ..jobs import signals
 
-        pool = cf.ProcessPoolExecutor(max_workers=n_proc, mp_context=mp.get_context("spawn"), initializer=_pool_init)
+        pool = cf.ProcessPoolExecutor(max_workers=n_proc, mp_context=signals.spawn_context(), initializer=_pool_init)
         clean = False
         try:
             futs = {pool.submit(_detect_one, session, key[0], key[1], opts.get(key), thumbnails, hit, unreadable):

@@ -518,9 +518,10 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     tmp: Path | None = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp_s = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
-        os.close(fd)
-        tmp = Path(tmp_s)
+        with signals.deferred():  # a temporary is never created without its name being known here
+            fd, tmp_s = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
+            os.close(fd)
+            tmp = Path(tmp_s)
         yield tmp
         _publish(tmp)
         os.replace(tmp, path)
@@ -612,9 +613,10 @@ def check_output_location(out: str | Path, what: str = "output", *, folder: bool
     if not base.is_dir():
         raise InputError(f"{what} cannot be made: {base} is a file, not a folder", out)
     try:
-        fd, probe = tempfile.mkstemp(prefix=".plantreg-probe.", dir=base)
-        os.close(fd)
-        os.unlink(probe)
+        with signals.deferred():
+            fd, probe = tempfile.mkstemp(prefix=".plantreg-probe.", dir=base)
+            os.close(fd)
+            os.unlink(probe)
     except OSError as e:
         raise InputError(f"{what} cannot be written: {base} is not writable ({e.strerror or e})", out) from None
     return out
@@ -641,7 +643,8 @@ def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path
     old: Path | None = None
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+        with signals.deferred():
+            tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
         yield tmp
         _publish(tmp, is_dir=True)
         with signals.deferred():
@@ -691,9 +694,10 @@ def atomic_files(paths: list[str | Path], remove: list[str | Path] = ()) -> Iter
         for p in finals:
             current = p
             p.parent.mkdir(parents=True, exist_ok=True)
-            fd, t = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".part{p.suffix}", dir=p.parent)
-            os.close(fd)
-            tmps[p] = Path(t)
+            with signals.deferred():
+                fd, t = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".part{p.suffix}", dir=p.parent)
+                os.close(fd)
+                tmps[p] = Path(t)
         current = None
         yield dict(tmps)
         with signals.deferred():

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import itertools
-import multiprocessing as mp
 import queue
 import threading
 import time
@@ -105,7 +104,9 @@ def _pool_locked() -> tuple[cf.ProcessPoolExecutor, Any, Any]:
 
             atexit.register(_kill_pool)
             _exit_hook.append(True)
-        ctx = mp.get_context("spawn")
+        from . import signals
+
+        ctx = signals.spawn_context()
         q, ev = ctx.Queue(), ctx.Event()
         _state["pool"] = cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_child_init,
                                                 initargs=(q, ev))
@@ -214,7 +215,9 @@ def call_in_process(fn: Callable[..., Any], *args: Any, progress: Reporter | Non
     ``progress`` is cancelled, :class:`PlantregError` with the child's message when it raised
     one, ``RuntimeError`` for anything else (the child's traceback in the message)."""
     rep = ensure_reporter(progress)
-    ctx = mp.get_context("spawn")  # never fork a process that runs Qt threads
+    from . import signals
+
+    ctx = signals.spawn_context()  # never fork a process that runs Qt threads
     q = ctx.Queue()
     p = ctx.Process(target=_one_child, args=(fn, args, kwargs, q), daemon=True)
     p.start()

@@ -158,6 +158,23 @@ def child_init() -> None:
     install()
 
 
+def spawn_context():
+    """``multiprocessing``'s ``spawn`` context for every child process we start (no forked Qt or
+    thread state). First starts multiprocessing's resource-tracker process, if it is not running,
+    with :data:`TERMINATING` blocked: it shares our process group, and dying from a SIGHUP or
+    SIGQUIT meant to stop us, it was restarted and printed tracebacks (it blocks only SIGINT and
+    SIGTERM by itself). Blocked here, not ignored, so that no signal to us is lost meanwhile."""
+    import multiprocessing as mp
+    from multiprocessing import resource_tracker
+
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, set(TERMINATING))
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+    return mp.get_context("spawn")
+
+
 def stop_processes(procs: Iterable, grace_s: float = CHILD_GRACE_S) -> None:
     """End child processes (``multiprocessing.Process``): SIGTERM to all (they clean up, see
     :func:`child_init`), wait up to ``grace_s`` in all, then SIGKILL what is left."""
@@ -187,4 +204,4 @@ def pool_processes(pool) -> list:
 
 
 __all__ = ["TERMINATING", "Terminated", "install", "uninstall", "terminating", "check", "deferred", "child_init",
-           "stop_processes", "pool_processes"]
+           "spawn_context", "stop_processes", "pool_processes"]

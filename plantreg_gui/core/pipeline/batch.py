@@ -371,11 +371,11 @@ def run_local(settings: BatchSettings, jobs: list[Job], workers: int) -> Iterato
     finished is submitted again; a job that was running in a dying pool twice is reported
     failed (it may be what kills the worker, e.g. by running out of memory).
     """
-    import multiprocessing
-
     attempts = {j.name: 0 for j in jobs}
     todo = list(jobs)
-    ctx = multiprocessing.get_context("spawn")  # no fork of a process with threads
+    from ..jobs import signals
+
+    ctx = signals.spawn_context()  # no fork of a process with threads
     # the workers are the parallelism: a BLAS thread pool per worker only contends with the others
     # (a 204 x 204 eigen-decomposition for a preview took seconds with 2 workers x 2 BLAS threads)
     threads = str(max(1, (os.cpu_count() or 1) // max(1, workers)))
