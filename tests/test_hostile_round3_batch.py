@@ -118,7 +118,7 @@ def test_a_scheduler_that_is_not_dask_is_refused_before_out_exists(tmp_path, kin
 
 def test_a_real_scheduler_passes_the_handshake(tmp_path):
     """The check accepts a real Dask scheduler (what it is there for) and says it is one."""
-    from plantreg_gui.core.pipeline import batch
+    from plantreg_gui.core.pipeline import batch_guard
 
     sf = tmp_path / "scheduler.json"
     p = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port",
@@ -129,7 +129,7 @@ def test_a_real_scheduler_passes_the_handshake(tmp_path):
         while not (sf.is_file() and sf.read_text().strip()) and time.monotonic() - t0 < 90:
             time.sleep(0.1)
         addr = json.loads(sf.read_text())["address"]
-        assert batch.check_scheduler(addr)["type"] == "Scheduler"
+        assert batch_guard.check_scheduler(addr)["type"] == "Scheduler"
     finally:
         os.killpg(p.pid, signal.SIGTERM)
         p.wait(30)
@@ -380,7 +380,7 @@ def test_deferred_section_on_a_worker_thread_holds_the_signal():
     """The mechanism itself: a worker thread in a deferred section when SIGTERM arrives; the main
     thread (where Python runs handlers) gets :class:`Terminated` only after the section ended, and
     no new section starts once the process is terminating."""
-    from plantreg_gui.core.jobs import signals
+    from plantreg_gui.core import signals
 
     old = signals.install()
     events: list[str] = []

@@ -17,8 +17,8 @@ from .. import __version__, prefer_one_blas_thread
 
 prefer_one_blas_thread()  # before numpy is first imported (the subcommands import it)
 from ..core.errors import Cancelled, PlantregError
-from ..core.jobs import signals
-from ..core.jobs.signals import Terminated  # noqa: F401 - raised by a terminating signal (docs/errors.md)
+from ..core import signals
+from ..core.signals import Terminated  # noqa: F401 - raised by a terminating signal (docs/errors.md)
 
 SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "recording", "batch")  # modules NAME_cmd
 
@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     # the words of this command line, for provenance (sys.argv is someone else's when called in-process)
     args.argv = list(sys.argv[1:] if argv is None else argv)
-    # SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGALRM, SIGXCPU ... unwind like Ctrl-C (core/jobs/signals.py)
+    # SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGALRM, SIGXCPU ... unwind like Ctrl-C (core/signals.py)
     old_handlers = signals.install()
     try:
         return int(args.run(args) or 0)

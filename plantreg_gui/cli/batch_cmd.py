@@ -10,7 +10,8 @@ row per recording (status done / skipped / failed, the error, case shares, timin
 later run into the same OUT adds its rows to it (a recording run again gets its new row). One
 batch at a time per OUT (a lock file, ``OUT/.plantreg-batch.lock``, while it runs); a
 ``--scheduler`` is asked who it is before OUT is created. A re-run skips recordings whose output is complete and made from the same inputs and
-parameters. Exit code 1 if any recording failed. Engine: :mod:`plantreg_gui.core.pipeline.batch`.
+parameters. Exit code 1 if any recording failed. Engine: :mod:`plantreg_gui.core.pipeline.batch`
+(and :mod:`~plantreg_gui.core.pipeline.batch_guard`).
 """
 
 from __future__ import annotations
@@ -87,7 +88,7 @@ class _Progress:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..core.pipeline import batch
+    from ..core.pipeline import batch, batch_guard
     from ..core.export.export import check_output_spares_inputs
     from .register_cmd import load_rig_for_target, output_options, registration_params
 
@@ -103,12 +104,12 @@ def run(args: argparse.Namespace) -> int:
     jobs = batch.plan(batch.expand_inputs(args.recordings), out)  # name clashes: refused before any work
     check_output_spares_inputs(out, [rig_path] + [Path(j.recording) for j in jobs])
     if args.scheduler:  # before OUT exists: a wrong address leaves nothing behind
-        batch.check_scheduler(args.scheduler)
+        batch_guard.check_scheduler(args.scheduler)
     made = not os.path.lexists(out)
     out.mkdir(parents=True, exist_ok=True)
     try:
-        with batch.OutputLock(out):  # a second batch into OUT is refused while this one runs
-            return _run_locked(args, batch, jobs, out, rig_path, options, params)
+        with batch_guard.OutputLock(out):  # a second batch into OUT is refused while this one runs
+            return _run_locked(args, jobs, out, rig_path, options, params)
     finally:
         if made:  # nothing was written (refused, or stopped before the first row): no empty OUT
             try:
@@ -117,9 +118,11 @@ def run(args: argparse.Namespace) -> int:
                 pass
 
 
-def _run_locked(args, batch, jobs, out: Path, rig_path: Path, options, params) -> int:
-    csv_path = out / batch.BATCH_CSV
-    earlier = batch.read_csv(csv_path)  # rows of earlier runs into OUT: kept, ours merged in
+def _run_locked(args, jobs, out: Path, rig_path: Path, options, params) -> int:
+    from ..core.pipeline import batch, batch_guard
+
+    csv_path = out / batch_guard.BATCH_CSV
+    earlier = batch_guard.read_csv(csv_path)  # rows of earlier runs into OUT: kept, ours merged in
     settings = batch.BatchSettings(rig=str(rig_path), target=args.target, out=str(out), params=params.to_dict(),
                                    outputs=options.parts, overwrite=bool(args.overwrite),
                                    tiff_codec=options.tiff_codec, drop_mixed=options.drop_mixed)
@@ -134,7 +137,7 @@ def _run_locked(args, batch, jobs, out: Path, rig_path: Path, options, params) -
     progress = _Progress(len(jobs), args.quiet)
 
     def table() -> list[dict]:
-        return batch.merge_rows(earlier, sorted(rows.values(), key=lambda r: order[r["name"]]))
+        return batch_guard.merge_rows(earlier, sorted(rows.values(), key=lambda r: order[r["name"]]))
 
     t0 = time.monotonic()
     last_csv = 0.0
@@ -143,12 +146,12 @@ def _run_locked(args, batch, jobs, out: Path, rig_path: Path, options, params) -
             rows[row["name"]] = row
             progress.update(row)
             if time.monotonic() - last_csv > 2.0:  # a crash of this process still leaves a table behind
-                batch.write_csv(csv_path, table())
+                batch_guard.write_csv(csv_path, table())
                 last_csv = time.monotonic()
     finally:
         progress.close()
         if rows:
-            batch.write_csv(csv_path, table())
+            batch_guard.write_csv(csv_path, table())
     wall = time.monotonic() - t0
     counts = {s: sum(1 for r in rows.values() if r["status"] == s) for s in ("done", "skipped", "failed")}
     kept = len({r["name"] for r in earlier} - set(rows))

@@ -760,7 +760,7 @@ def _pool_init() -> None:
     """In each detection process: the CLI's signal handling (core/jobs/signals.py: a signal to the
     process group ends a worker quietly; the parent decides what the run does). One OpenCV
     thread each: the processes already use every core."""
-    from ..jobs import signals
+    from .. import signals
 
     signals.child_init()
     cv2.setNumThreads(1)
@@ -842,7 +842,7 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
                 yield det, thumb
             ok = True
             return
-        from ..jobs import signals
+        from .. import signals
 
         pool = cf.ProcessPoolExecutor(max_workers=n_proc, mp_context=signals.spawn_context(), initializer=_pool_init)
         clean = False
@@ -860,7 +860,7 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
                         det, thumb = fut.result()
                     except cf.process.BrokenProcessPool:
                         from ..errors import PlantregError
-                        from ..jobs import signals
+                        from .. import signals
 
                         signals.check()  # the process group was signalled: say so, not "ended unexpectedly"
                         raise PlantregError("a corner detection process ended unexpectedly (out of memory?)") from None
@@ -874,7 +874,7 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
             if clean:
                 pool.shutdown(wait=True)
             else:  # cancelled, an error, a signal, or the consumer stopped: no worker may go on
-                from ..jobs import signals
+                from .. import signals
 
                 procs = signals.pool_processes(pool)
                 pool.shutdown(wait=False, cancel_futures=True)

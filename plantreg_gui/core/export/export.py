@@ -356,7 +356,7 @@ class EarlyTiffs:
         import threading
         from concurrent.futures import ThreadPoolExecutor
 
-        from ..jobs import signals
+        from .. import signals
 
         self.out.parent.mkdir(parents=True, exist_ok=True)
         with signals.deferred():  # a signal here would leave the folder without __exit__ to remove it

@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, one_line
-from ..jobs import signals
+from .. import signals
 
 #: Still formats OpenCV decodes besides PNG/JPEG/TIFF (thermal and machine-vision cameras write
 #: 16-bit PGM, 8-bit PPM, BMP): suffix -> (format name, accepted file signatures).

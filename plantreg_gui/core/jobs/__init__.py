@@ -1,4 +1,3 @@
-"""Child processes and signals: core work in a child process (cancellable, with progress), so
-that GIL-holding steps do not freeze a GUI thread (:mod:`.process_job`), and the one handling of
-terminating signals for every thread and child process (:mod:`.signals`).
+"""Core work in a child process (cancellable, with progress), so that GIL-holding steps do not
+freeze a GUI thread: :mod:`.process_job`. How child processes meet signals: :mod:`..signals`.
 """

@@ -19,9 +19,9 @@ calibrating. In a child process the GUI thread keeps the GIL to itself. Two ways
 
 ``fn``, its arguments and its result must pickle (module-level functions of the core,
 dataclasses, numpy arrays); a :class:`PlantregError` raised in the child is re-raised here.
-Every child runs :func:`~.signals.child_init` (a signal to the process group makes it remove
-its temporary outputs) and is ended with :func:`~.signals.stop_processes` (SIGTERM, a grace
-period, SIGKILL). No Qt here: the child imports only ``fn``'s module.
+Every child runs :func:`~plantreg_gui.core.signals.child_init` (a signal to the process group
+makes it remove its temporary outputs) and is ended with
+:func:`~plantreg_gui.core.signals.stop_processes` (SIGTERM, a grace period, SIGKILL). No Qt here: the child imports only ``fn``'s module.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ import time
 import traceback
 from typing import Any, Callable
 
+from .. import signals
 from ..errors import Cancelled, PlantregError
 from ..progress import CancelToken, Reporter, ensure_reporter
 
@@ -51,8 +52,6 @@ _child: dict[str, Any] = {}
 
 def _child_init(q, ev) -> None:
     import os
-
-    from . import signals
 
     signals.child_init()
     _child["queue"], _child["cancel"], _child["parent"] = q, ev, os.getppid()
@@ -104,8 +103,6 @@ def _pool_locked() -> tuple[cf.ProcessPoolExecutor, Any, Any]:
 
             atexit.register(_kill_pool)
             _exit_hook.append(True)
-        from . import signals
-
         ctx = signals.spawn_context()
         q, ev = ctx.Queue(), ctx.Event()
         _state["pool"] = cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_child_init,
@@ -121,8 +118,6 @@ def _kill_pool() -> None:
         _state.pop("cancel", None)
     if pool is None:
         return
-    from . import signals
-
     procs = signals.pool_processes(pool)
     pool.shutdown(wait=False, cancel_futures=True)
     signals.stop_processes(procs, grace_s=2.0)
@@ -187,8 +182,6 @@ def _now() -> float:
 
 # ---------------------------------------------------------------------- one routine, a fresh process
 def _one_child(fn: Callable[..., Any], args: tuple, kwargs: dict, q: Any) -> None:
-    from . import signals
-
     signals.child_init()
     last = [0.0]
 
@@ -215,8 +208,6 @@ def call_in_process(fn: Callable[..., Any], *args: Any, progress: Reporter | Non
     ``progress`` is cancelled, :class:`PlantregError` with the child's message when it raised
     one, ``RuntimeError`` for anything else (the child's traceback in the message)."""
     rep = ensure_reporter(progress)
-    from . import signals
-
     ctx = signals.spawn_context()  # never fork a process that runs Qt threads
     q = ctx.Queue()
     p = ctx.Process(target=_one_child, args=(fn, args, kwargs, q), daemon=True)
@@ -239,8 +230,6 @@ def call_in_process(fn: Callable[..., Any], *args: Any, progress: Reporter | Non
             else:
                 raise RuntimeError(f"{a}\n{b}")
     except BaseException:  # cancelled, failed, or this process is ending: so is the child
-        from . import signals
-
         signals.stop_processes([p])
         raise
     finally:
