@@ -22,7 +22,7 @@ from plantreg_gui.core.synthetic import make_plant_scene
 from plantreg_gui.core.synthetic.landmarks import perturb_rig, synthetic_landmarks
 
 CAM = "thermal"
-ALLOWED_GAP_S = 0.5  # on an idle machine; times the stretch of a control measured alongside (stall_probe)
+ALLOWED_GAP_S = 0.5  # on an idle machine; widened by a control measured alongside (stall_probe.LoadControl)
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ reads is safe. Refine: runs in a child process (its camera threads no longer com
 GUI thread for the GIL), and Cancel stops it at once.
 
 The thread checks are exact (who called the reader); the stall probe's figure is printed, with
-the bound of tests/test_gui_landmarks.py, scaled by a control process measured alongside
+the bound of tests/test_gui_landmarks.py, widened by a control process measured alongside
 (stall_probe.LoadControl) so that a busy machine does not fail it.
 """
 
@@ -20,7 +20,7 @@ from plantreg_gui.core.data.recording import Recording
 
 pytestmark = pytest.mark.gui
 
-ALLOWED_GAP_S = 0.5  # on an idle machine; times the stretch of a control measured alongside (stall_probe)
+ALLOWED_GAP_S = 0.5  # on an idle machine; widened by a control measured alongside (stall_probe.LoadControl)
 
 
 @pytest.fixture

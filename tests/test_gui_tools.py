@@ -360,7 +360,7 @@ def test_alias_removed_and_3d_view_without_auto_update(qtbot):
 
 def test_region_statistics_keep_the_gui_thread_responsive(registered_workspace, qtbot):
     """The region's statistics run on a worker (a 4K cube's take seconds). Tolerance as in
-    test_gui_session.test_registration_keeps_the_gui_thread_responsive: 0.2 s times the stretch a
+    test_gui_session.test_registration_keeps_the_gui_thread_responsive: 0.2 s widened by the stretch a
     control process saw over the same interval (stall_probe.LoadControl)."""
     from stall_probe import LoadControl, StallProbe
 
@@ -383,7 +383,7 @@ def test_region_statistics_keep_the_gui_thread_responsive(registered_workspace, 
 def test_first_show_of_the_3d_tab_is_staged_and_complete(registered_workspace, qtbot):
     """The 3D tab's first show (GL widget, scene, first frames with software OpenGL) is built over
     several event-loop turns and ends with the whole scene: every point, both meshes, the axes.
-    Tolerance as in test_region_statistics_keep_the_gui_thread_responsive: 0.2 s times the
+    Tolerance as in test_region_statistics_keep_the_gui_thread_responsive: 0.2 s widened by the
     control's stretch. (Before: one 265-374 ms gap on the idle machine.)"""
     from stall_probe import LoadControl, StallProbe
 

@@ -10,7 +10,7 @@ Tolerance. The goal is no gap over 200 ms on an idle 2-core machine
 work, where a process that wants the CPU waits for it (at a load of 20 on 2 cores, 50 ms of
 painting takes half a second). So a control process (:class:`stall_probe.LoadControl`: same
 priority, no Qt, no GIL shared with us, 20 ms of CPU work and 20 ms of sleep like an event loop)
-runs over the same interval; the test allows 1 s times the stretch it saw. On an idle machine
+runs over the same interval; the test allows 1 s widened by the stretch it saw. On an idle machine
 that is about 1 s: the freezes this guards against (seconds of work on the GUI thread or of a
 worker holding the GIL) fail it; on a busy machine the test is correspondingly weaker.
 """
