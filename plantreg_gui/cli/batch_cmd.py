@@ -9,8 +9,8 @@ A RECORDING is a recording folder, or a text/CSV file listing one per line. Each
 row per recording (status done / skipped / failed, the error, case shares, timings, files); a
 later run into the same OUT adds its rows to it (a recording run again gets its new row). One
 batch at a time per OUT (a lock file, ``OUT/.plantreg-batch.lock``, while it runs); a
-``--scheduler`` is asked who it is before OUT is created. A re-run skips recordings whose output is complete and made from the same inputs and
-parameters. Exit code 1 if any recording failed. Engine: :mod:`plantreg_gui.core.pipeline.batch`
+``--scheduler`` is asked who it is before OUT is created. A re-run skips recordings whose
+output is complete and made from the same inputs and parameters. Exit code 1 if any recording failed. Engine: :mod:`plantreg_gui.core.pipeline.batch`
 (and :mod:`~plantreg_gui.core.pipeline.batch_guard`).
 """
 
