@@ -208,30 +208,6 @@ def test_a_concurrent_batch_into_the_same_out_is_refused_and_a_stale_lock_is_tak
     assert sorted(p.name for p in out.iterdir()) == ["batch.csv", "rec"]
 
 
-def test_two_batches_started_together_into_one_out(tmp_path):
-    """Two real batch processes into one OUT at once: one runs, the other is refused (or, if the
-    first had already finished, skips the finished recording) -- never two writers; batch.csv
-    ends with the recording's row once and no lock file is left."""
-    rig, rec = _write_inputs(tmp_path)
-    out = tmp_path / "out"
-    cmd = [*PLANTREG, "batch", "--rig", str(rig), "--target", "ir", "--out", str(out), "--workers", "1", "--quiet",
-           str(rec)]
-    procs = [subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for _ in range(2)]
-    results = [(p.wait(180), p.stderr.read(), p.stdout.read()) for p in procs]
-    for p in procs:
-        p.stdout.close()
-        p.stderr.close()
-    codes = sorted(c for c, _, _ in results)
-    assert codes in ([0, 0], [0, 1]), results
-    for code, err, _ in results:
-        assert "Traceback" not in err
-        if code == 1:
-            assert "another plantreg batch" in err and str(out) in err, err
-    assert list(_rows(out)) == ["rec"] and _rows(out)["rec"]["status"] in ("done", "skipped")
-    assert _leftovers(out) == []
-
-
 # ---------------------------------------------------------------------- signals
 def _wait_for_part(folder: Path, pattern: str, proc: subprocess.Popen, timeout: float = 300) -> Path | None:
     t0 = time.monotonic()
@@ -252,6 +228,30 @@ def two_recordings(demo_dir, tmp_path_factory):
         shutil.copytree(demo_dir / "recording", root / name)
         recs.append(root / name)
     return demo_dir / "rig.json", recs
+
+
+def test_a_second_batch_while_the_first_writes_is_refused(two_recordings, tmp_path):
+    """Batch A is writing into OUT (its worker's hidden folder seen) when batch B is started into
+    the same OUT: B is refused with one line naming OUT and A's process, and writes nothing; A
+    ends normally with both rows and no lock file left (B used to run too, the last writer's
+    batch.csv winning)."""
+    rig, recs = two_recordings
+    out = tmp_path / "out"
+    cmd = [*PLANTREG, "batch", "--rig", str(rig), "--target", "ir", "--out", str(out), "--workers", "1", "--quiet"]
+    a = subprocess.Popen([*cmd, *map(str, recs)], env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    try:
+        assert _wait_for_part(out, ".rec0*.part", a) is not None
+        b = subprocess.run([*cmd, str(recs[0])], env=_env(), capture_output=True, text=True, timeout=120)
+        _o, err_a = a.communicate(timeout=300)
+    finally:
+        if a.poll() is None:
+            a.kill()
+    assert b.returncode == 1 and "another plantreg batch" in b.stderr and f"process {a.pid}" in b.stderr, b.stderr
+    assert str(out) in b.stderr and len(b.stderr.strip().splitlines()) == 1
+    assert a.returncode == 0, err_a
+    assert list(_rows(out)) == ["rec01", "rec02"] and {r["status"] for r in _rows(out).values()} == {"done"}
+    assert _leftovers(out) == []
 
 
 def test_sigterm_to_the_batch_process_group_leaves_no_part(two_recordings, tmp_path):
