@@ -48,6 +48,21 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
+def check_output_rig(out: Path, overwrite: bool, inputs: dict[str, Path] | None = None) -> None:
+    """Refuse an output rig path before any work (``fit-rig``, ``rig create``): an existing file
+    without ``overwrite``, one of the command's ``inputs`` (what -> path), a folder, a missing
+    folder. The rig is then written atomically by :meth:`Rig.save`."""
+    if out.exists() and not overwrite:
+        raise InputError("output rig file exists (choose another, or pass --overwrite)", out)
+    for what, p in (inputs or {}).items():
+        if out.exists() and p.exists() and out.resolve() == p.resolve():
+            raise InputError(f"--out is {what}; write the rig elsewhere", out)
+    if out.is_dir():
+        raise InputError("output path is a folder, not a file", out)
+    if not out.absolute().parent.is_dir():
+        raise InputError("the folder for the output rig does not exist", out.absolute().parent)
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import cli
     from ..core.data.landmarks import LandmarkSet
@@ -55,14 +70,7 @@ def run(args: argparse.Namespace) -> int:
     from ..core.rigfit.rigfit import fit_rig_from_file, format_report, parse_free
 
     out: Path = args.out
-    if out.exists() and not args.overwrite:
-        raise InputError("output rig file exists (choose another, or pass --overwrite)", out)
-    if out.exists() and out.resolve() == Path(args.landmarks).resolve():
-        raise InputError("--out is the landmarks file; write the rig elsewhere", out)
-    if out.is_dir():
-        raise InputError("output path is a folder, not a file", out)
-    if not out.absolute().parent.is_dir():
-        raise InputError("the folder for the output rig does not exist", out.absolute().parent)
+    check_output_rig(out, args.overwrite, {"the landmarks file": Path(args.landmarks)})
     if args.recording and not (args.refine or args.silhouette):
         raise InputError("--recording adds recordings for --refine or --silhouette; pass one of them too")
     free = parse_free(args.free)
