@@ -31,6 +31,7 @@ import numpy as np
 
 from ..camera import modality as modalities
 from ..camera.camera import Camera
+from ..camera.record import CalibrationRecord
 from ..camera.rig import Rig
 from ..errors import InputError
 from ..io.imageio import read_json
@@ -264,5 +265,5 @@ def create_rig(specs: list[CameraSpec], depth_camera: str, depth_scale: float = 
         if not np.all(hi > lo):
             raise InputError("--roi: every max must be larger than its min")
         rig.roi_min, rig.roi_max = lo, hi
-    rig.extra["calibration"] = {"method": "start", "source": "plantreg rig create", "warnings": warnings}
+    CalibrationRecord("start", "plantreg rig create", details={"warnings": warnings}).store(rig)
     return rig, warnings
