@@ -308,3 +308,27 @@ def test_fit_rig_command_writes_the_typed_record(demo, tmp_path, capsys):
     assert np.allclose(rig.camera("hyperspectral").R_cam_rig, Rig.load(tmp_path / "start.json").camera(
         "hyperspectral").R_cam_rig)
     assert calibration_residual_px(rig.extra, "thermal") >= rec.per_camera["thermal"]["median_px"] > 0
+
+
+REAL = cli.Path(__file__).parents[1] / "resources" / "plant3dimagereg"
+
+
+@pytest.mark.skipif(not (REAL / "recordings" / "01grapevine" / "recording.json").exists(), reason="real data missing")
+def test_the_real_grapevine_click_past_a_leaf_edge_is_flagged_and_no_shipped_landmark_is():
+    """The issue's case: on the grapevine a click at u = 206.5 reads the ground (1.21 m), one
+    pixel right reads the leaf (0.65 m)."""
+    from plantreg_gui.core.rigfit.rigfit import load_recording_landmarks
+
+    rig = Rig.load(REAL / "rig.json")
+    depth = Recording.load(REAL / "recordings" / "01grapevine", rig).depth_m(rig.depth_scale)
+    z, _ = landmark_depth(depth, np.array([206.5, 235.0]))
+    assert z == pytest.approx(1.21, abs=0.02)
+    why, z_snap = depth_jump(depth, np.array([206.5, 235.0]), z, rig.ground_z)
+    assert "ground" in why and z_snap == pytest.approx(landmark_depth(depth, np.array([207.5, 235.0]))[0], abs=0.015)
+    z_leaf, _ = landmark_depth(depth, np.array([207.5, 235.0]))
+    assert z_leaf < 0.7 and depth_jump(depth, np.array([207.5, 235.0]), z_leaf, rig.ground_z)[0] == ""
+    for f in ("landmarks.json", "landmarks_heldout.json"):  # read with care and moved onto the leaf
+        for r in load_recording_landmarks(rig, LandmarkSet.load(REAL / f, rig)):
+            for lm in r.points:
+                zz, _ = landmark_depth(r.depth_m, lm.depth_uv)
+                assert depth_jump(r.depth_m, lm.depth_uv, zz, rig.ground_z)[0] == "", (f, r.name, lm.note)

@@ -249,8 +249,9 @@ def depth_jump(depth_m: np.ndarray, uv: np.ndarray, z: float, ground_z: float | 
                ) -> tuple[str, float]:
     """Whether the depth ``z`` read under the click ``uv`` (2,) lies on a surface well behind one
     right beside it (the ground or a leaf behind, seen through a notch or just past a leaf's
-    edge): at least half the pixels with depth in the (2r+1)^2 window, or a quarter of those in
-    the 7x7 core, lie more than 5 cm + 5 % nearer. Returns ``("", nan)`` or ``(reason, z_snapped)``: the nearer surface's
+    edge): two thirds of the pixels with depth in the (2r+1)^2 window lie more than 5 cm + 5 %
+    nearer, or, for a depth within 5 cm of the ground plane ``ground_z``, a quarter of those in
+    the 7x7 core. Returns ``("", nan)`` or ``(reason, z_snapped)``: the nearer surface's
     depth at the click (a plane in inverse depth through its pixels, weighted towards the click)."""
     H, W = depth_m.shape
     u0, v0 = int(round(float(uv[0]))), int(round(float(uv[1])))
@@ -262,7 +263,10 @@ def depth_jump(depth_m: np.ndarray, uv: np.ndarray, z: float, ground_z: float | 
     near = ok & (win < z - (0.05 + 0.05 * z))
     cv, cu = v0 - a0, u0 - b0
     core_ok, core_near = (m[max(0, cv - 3):cv + 4, max(0, cu - 3):cu + 4] for m in (ok, near))
-    if near.sum() < 0.5 * ok.sum() and not (core_ok.sum() and core_near.sum() >= 0.25 * core_ok.sum()):
+    at_ground = ground_z is not None and z > ground_z - 0.05
+    # surrounded by a nearer surface (a notch, a hole); or at the ground's depth right beside one
+    # (a click just past a leaf's edge; a lower leaf beside an upper one's edge is a fair landmark)
+    if near.sum() < 0.65 * ok.sum() and not (at_ground and core_ok.sum() and core_near.sum() >= 0.25 * core_ok.sum()):
         return "", math.nan
     vv, uu = np.nonzero(near)
     zn = win[near]
@@ -272,7 +276,7 @@ def depth_jump(depth_m: np.ndarray, uv: np.ndarray, z: float, ground_z: float | 
     zs = inverse_depth_plane(zn[keep], du, dv, np.exp(-(du ** 2 + dv ** 2) / (2.0 * (0.5 * radius) ** 2)))
     if not (np.isfinite(zs) and zn[keep].min() - 0.02 <= zs <= zn[keep].max() + 0.02):
         zs = float(lead)
-    where = " (the ground's depth)" if ground_z is not None and z > ground_z - 0.03 else ""
+    where = " (the ground's depth)" if at_ground else ""
     return (f"depth {z:.3f} m{where} lies {100 * (z - lead):.0f} cm behind the surface filling "
             f"{100 * near.sum() / ok.sum():.0f} % of its {2 * radius + 1}x{2 * radius + 1} neighbourhood "
             f"({lead:.3f} m) and reaching to within {_nearest(near, cv, cu):.0f} px of it: a click past a leaf's "
