@@ -79,6 +79,13 @@ def test_rig_create_turns_cameras_as_the_real_plants_need(tmp_path, capsys):
         np.testing.assert_allclose(rig.camera(c).K, nominal.camera(c).K, atol=0.01)
     assert rig.camera("ir").K[0, 0] == pytest.approx(SDK_NFOV["fx"], abs=2e-3)
     assert "thermal:focal" in err  # the data sheet's field of view: told how to fit the focal length
+    # without the device's calibration: the typical lens the real plants' start rig uses (README)
+    code, _, err = _run(["rig", "create", str(tmp_path / "t.json"), "--depth-camera", "ir",
+                         "--camera", "ir=infrared,640x576,kinect=typical,rot=0"], capsys)
+    assert code == 0 and "ir:k1" in err
+    typ = Rig.load(tmp_path / "t.json").camera("ir")
+    np.testing.assert_allclose(typ.K, nominal.camera("ir").K, atol=1e-9)
+    np.testing.assert_allclose(typ.dist, nominal.camera("ir").dist, atol=1e-12)
     # the data sheet's 75 x 65 degrees is not a pinhole: said so
     code, _, err = _run(["rig", "create", str(tmp_path / "b.json"), "--depth-camera", "ir",
                          "--camera", "ir=infrared,640x576,hfov=75,vfov=65,rot=0"], capsys)

@@ -30,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     c.add_argument("--depth-camera", required=True, metavar="NAME", help="the camera the depth maps belong to")
     c.add_argument("--camera", action="append", required=True, default=[], metavar="SPEC",
                    help="NAME=MODALITY,WxH,LENS,rot=0|90|180|270[,at=X,Y,Z] with LENS hfov=DEG[,vfov=DEG] | "
-                        "f=PX[,fy=PX] | kinect=CALIBRATION.json; rot = degrees the scene appears turned "
+                        "f=PX[,fy=PX] | kinect=CALIBRATION.json | kinect=typical; rot = degrees the scene appears turned "
                         "anticlockwise against the depth camera's image; at = optical centre in metres in the "
                         "depth camera's frame (x right, y down, z forward). Repeat per camera.")
     c.add_argument("--depth-scale", type=float, default=0.001, metavar="S", help="metres per depth unit (0.001)")

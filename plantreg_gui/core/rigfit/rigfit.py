@@ -661,6 +661,12 @@ def fit_rig(rig: Rig, recordings: Sequence[RecordingLandmarks], *, free: Iterabl
             not_fitted = {}
     prob, x, keys, rejected, notes, out = _solve(rig, recordings, free, priors, cams_sel)
     fitted = prob.to_rig(x)
+    try:  # a rig no tool could load afterwards (a lens model folding the image) is no result
+        Rig.from_dict(fitted.to_dict())
+    except InputError as e:
+        raise InputError(f"the fitted rig is not usable ({e.detail}): the start lens is too far from the real one "
+                         "for the terms freed -- start from a better lens (the camera's own calibration, a focal "
+                         "length) or free fewer terms") from None
     r = prob.residuals_px(x)
     rows = []
     for i, o in enumerate(prob.obs):

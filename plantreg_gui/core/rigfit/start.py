@@ -5,7 +5,7 @@ position -- and the Azure Kinect's factory calibration where the recording carri
 Camera spec (one ``--camera`` each)::
 
     NAME=MODALITY,WxH,LENS,rot=0|90|180|270[,at=X,Y,Z]
-    LENS: hfov=DEG[,vfov=DEG] | f=PX[,fy=PX] | kinect=CALIBRATION.json
+    LENS: hfov=DEG[,vfov=DEG] | f=PX[,fy=PX] | kinect=CALIBRATION.json | kinect=typical
 
 ``rot=A``: the scene appears turned ``A`` degrees anticlockwise in this camera's image compared
 with the depth camera's (A = 90: the depth camera's up is this camera's left). ``at``: the
@@ -17,7 +17,8 @@ The Azure Kinect reader takes the raw calibration JSON (``CalibrationInformation
 ``calibration.json`` attachment) and converts the depth camera's parameters to a depth mode as
 the SDK does (``transformation_get_mode_specific_depth_camera_calibration``: normalised
 parameters times the binned sensor size, minus the mode's crop offset, minus half a pixel for
-pixel centres at integers).
+pixel centres at integers). ``kinect=typical`` gives a typical device's lens instead (for
+recordings without their device's calibration; fit ``ir:k1`` and the principal point then).
 """
 
 from __future__ import annotations
@@ -43,6 +44,14 @@ KINECT_DEPTH_MODES = {
     (512, 512): ("WFOV_2X2BINNED", (512, 512), (0, 0)),
     (1024, 1024): ("WFOV_UNBINNED", (1024, 1024), (0, 0)),
 }
+
+#: a *typical* Azure Kinect depth lens for ``kinect=typical`` (a recording without its device's
+#: calibration): NFOV-unbinned fx = fy = 504, principal point (323.4, 329.8) -- the mean of three
+#: published factory calibrations -- and one of them's rational 6-k distortion as OpenCV
+#: [k1 k2 p1 p2 k3 k4 k5 k6] (resources/plant3dimagereg/landmark_scripts/make_nominal_rig.py cites them);
+#: stored as the SDK's raw normalised parameters (cx, cy, fx, fy of the 1024 x 1024 sensor, 0-cornered)
+KINECT_TYPICAL_RAW = ((323.4 + 0.5 + 192) / 1024, (329.8 + 0.5 + 180) / 1024, 504.0 / 1024, 504.0 / 1024)
+KINECT_TYPICAL_DIST = (4.7247, 3.2092, 0.0, 0.0, 0.1706, 5.0559, 4.7758, 0.8865)
 
 #: where a datasheet field of view is taken as a pinhole's and the two axes disagree by more than
 #: this, the lens is distorted (square pixels assumed) and the user is told
@@ -171,6 +180,11 @@ def read_kinect_depth_calibration(path: Path, width: int, height: int) -> tuple[
     if mode is None:
         sizes = ", ".join(f"{w}x{h} ({m[0]})" for (w, h), m in KINECT_DEPTH_MODES.items())
         raise InputError(f"no Azure Kinect depth mode gives {width}x{height} images (modes: {sizes})", path)
+    if str(path) == "typical":
+        name, (bw, bh), (ox, oy) = mode
+        cx, cy, fx, fy = KINECT_TYPICAL_RAW
+        K = np.array([[fx * bw, 0.0, cx * bw - ox - 0.5], [0.0, fy * bh, cy * bh - oy - 0.5], [0.0, 0.0, 1.0]])
+        return K, np.array(KINECT_TYPICAL_DIST), name + ", a typical device's lens, not this one's"
     d = read_json(Path(path), "Azure Kinect calibration")
     try:
         cams = d["CalibrationInformation"]["Cameras"]
@@ -209,7 +223,11 @@ def make_camera(spec: CameraSpec) -> tuple[Camera, list[str]]:
     extra: dict[str, Any] = {}
     if spec.kinect is not None:
         K, dist, mode = read_kinect_depth_calibration(spec.kinect, spec.width, spec.height)
-        extra["intrinsics_source"] = f"Azure Kinect factory calibration {spec.kinect} ({mode})"
+        extra["intrinsics_source"] = (f"Azure Kinect factory calibration {spec.kinect} ({mode})"
+                                      if str(spec.kinect) != "typical" else f"Azure Kinect {mode}")
+        if str(spec.kinect) == "typical":
+            warnings.append(f"{spec.name}: a typical Azure Kinect lens, not this device's: free its k1 (fit-rig --free "
+                            f"{spec.name}:k1) or, with enough landmarks, its principal point too")
     elif spec.fx is not None:
         fy = spec.fy if spec.fy is not None else spec.fx
         K = np.array([[spec.fx, 0, (spec.width - 1) / 2.0], [0, fy, (spec.height - 1) / 2.0], [0, 0, 1.0]])
