@@ -171,19 +171,24 @@ def test_leave_one_landmark_out_with_one_recording_says_what_fresh_landmarks_say
     assert "L" in format_report(res.report).split("\n")[2]
 
 
-def test_random_landmarks_are_refused(demo, tmp_path, capsys):
-    """Every camera pixel replaced by a random one: no rig fits them; exit 1, nothing written."""
-    true, scenes, depths = demo
-    rng = np.random.default_rng(8)
-    ls = LandmarkSet(base=tmp_path)
+def _landmark_file(true, scenes, folder, rng, jumble=False):
+    """Recording folders (depth only) of ``scenes`` and ``folder/lm.json`` with 12 landmarks each
+    (0.7 px click noise); ``jumble``: every camera pixel replaced by a random one."""
+    ls = LandmarkSet(base=folder)
     for s, sc in scenes.items():
-        Recording(None, render_depth(true, sc), {}).save(tmp_path / f"p{s}")
+        Recording(None, render_depth(true, sc), {}).save(folder / f"p{s}")
         pts = synthetic_landmarks(true, sc, 12, 0.7, rng)
-        for lm in pts:
+        for lm in pts if jumble else []:
             lm.cameras = {c: np.array([rng.uniform(0, true.camera(c).width - 1), rng.uniform(0, true.camera(c).height - 1)])
                           for c in lm.cameras}
         ls.recordings[f"p{s}"] = pts
-    ls.save(tmp_path / "lm.json")
+    ls.save(folder / "lm.json")
+
+
+def test_random_landmarks_are_refused(demo, tmp_path, capsys):
+    """Every camera pixel replaced by a random one: no rig fits them; exit 1, nothing written."""
+    true, scenes, depths = demo
+    _landmark_file(true, scenes, tmp_path, np.random.default_rng(8), jumble=True)
     true.save(tmp_path / "start.json")
     out = tmp_path / "fitted.json"
     code, _, err = _run(["fit-rig", "--rig", str(tmp_path / "start.json"), "--landmarks", str(tmp_path / "lm.json"),
@@ -198,11 +203,7 @@ def test_priors_from_the_command_line_reach_the_fit(demo, tmp_path, capsys):
     (focal=0.005) holds it short of the truth -- the command line's prior is the fit's."""
     true, scenes, depths = demo
     rng = np.random.default_rng(9)
-    ls = LandmarkSet(base=tmp_path)
-    for s, sc in scenes.items():
-        Recording(None, render_depth(true, sc), {}).save(tmp_path / f"p{s}")
-        ls.recordings[f"p{s}"] = synthetic_landmarks(true, sc, 12, 0.7, rng)
-    ls.save(tmp_path / "lm.json")
+    _landmark_file(true, scenes, tmp_path, rng)
     start = Rig.from_dict(true.to_dict())
     start.camera("thermal").K[:2, :2] *= 0.85
     start.save(tmp_path / "start.json")
@@ -299,11 +300,7 @@ def test_every_way_of_fitting_a_rig_keeps_the_mixed_pixel_widening(method):
 def test_fit_rig_command_writes_the_typed_record(demo, tmp_path, capsys):
     true, scenes, depths = demo
     rng = np.random.default_rng(12)
-    ls = LandmarkSet(base=tmp_path)
-    for s, sc in scenes.items():
-        Recording(None, render_depth(true, sc), {}).save(tmp_path / f"p{s}")
-        ls.recordings[f"p{s}"] = synthetic_landmarks(true, sc, 12, 0.7, rng)
-    ls.save(tmp_path / "lm.json")
+    _landmark_file(true, scenes, tmp_path, rng)
     perturb_rig(true, rng).save(tmp_path / "start.json")
     code, stdout, err = _run(["fit-rig", "--rig", str(tmp_path / "start.json"), "--landmarks", str(tmp_path / "lm.json"),
                               "--out", str(tmp_path / "f.json"), "--fit", "thermal,rgb"], capsys)
