@@ -1,11 +1,13 @@
 """``plantreg fit-rig``: fit a rig's cameras to landmarks clicked in the recordings themselves.
 
     plantreg fit-rig --rig START --landmarks LANDMARKS.json --out RIG
-                     [--free focal,principal,k1] [--refine] [--silhouette] [--recording DIR ...] [--overwrite] [--quiet]
+                     [--free focal,principal,k1] [--fit CAM,...] [--prior KEY=VAL,...] [--snap-depth]
+                     [--max-median PX] [--refine] [--silhouette] [--recording DIR ...] [--overwrite] [--quiet]
 
-Writes a normal rig file whose ``"calibration"`` entry records the method, the landmarks used,
-every residual and the leave-one-recording-out residuals, and prints the per-camera residual
-table with the worst landmarks (see docs/fit-rig.md).
+Writes a normal rig file whose ``"calibration"`` entry is the typed calibration record
+(``core/camera/record.py``: method, the landmarks used, every residual, leave-one-out residuals),
+and prints the per-camera residual table with the start notes and the worst landmarks (see
+docs/fit-rig.md). A fit the landmarks do not support writes nothing and exits 1.
 """
 
 from __future__ import annotations
