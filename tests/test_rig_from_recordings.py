@@ -252,7 +252,7 @@ def test_ground_landmark_is_left_out_or_snapped_in_the_fit(demo):
     u, v = int(round(uv[0])), int(round(uv[1]))
     z_true = d[v, u]
     d[v - 1:v + 2, u - 1:u + 2] = 1.25  # a 3x3 hole to the ground under the click
-    recs[0] = RecordingLandmarks(recs[0].name, d, recs[0].points)
+    recs[0] = RecordingLandmarks(recs[0].name, d, recs[0].points, snap_depth=False)
     res = fit_rig(true, recs, loo=False)
     assert any(r["index"] == 0 and "behind" in r["reason"] for r in res.report["landmarks_rejected"])
     recs[0].snap_depth = True

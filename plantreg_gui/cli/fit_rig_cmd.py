@@ -1,7 +1,7 @@
 """``plantreg fit-rig``: fit a rig's cameras to landmarks clicked in the recordings themselves.
 
     plantreg fit-rig --rig START --landmarks LANDMARKS.json --out RIG
-                     [--free focal,principal,k1] [--fit CAM,...] [--prior KEY=VAL,...] [--snap-depth]
+                     [--free focal,principal,k1] [--fit CAM,...] [--prior KEY=VAL,...] [--no-snap-depth]
                      [--max-median PX] [--refine] [--silhouette] [--recording DIR ...] [--overwrite] [--quiet]
 
 Writes a normal rig file whose ``"calibration"`` entry is the typed calibration record
@@ -45,9 +45,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--max-median", type=float, default=10.0, metavar="PX",
                    help="refuse (write nothing, exit 1) when a camera's median landmark residual exceeds PX "
                         "(default 10)")
-    p.add_argument("--snap-depth", action="store_true",
-                   help="put a landmark whose depth lies well behind the surface around it (the ground through "
-                        "a notch, past a leaf's edge) onto that surface instead of leaving it out")
+    p.add_argument("--no-snap-depth", action="store_true",
+                   help="leave out a landmark whose depth lies well behind the surface beside it (the ground "
+                        "through a notch, just past a leaf's edge) instead of putting it on that surface (default)")
     p.add_argument("--refine", action="store_true",
                    help="then refine the rig automatically from the images (see docs/fit-rig.md)")
     p.add_argument("--silhouette", action="store_true",
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     landmarks = LandmarkSet.load(args.landmarks)
     if landmarks.count() > 0:
         result = fit_rig_from_file(rig, landmarks, free=free, priors=priors, cameras=fit_cams,
-                                   max_median_px=args.max_median, snap_depth=args.snap_depth)
+                                   max_median_px=args.max_median, snap_depth=not args.no_snap_depth)
         fitted, report, warnings = result.rig, result.report, list(result.warnings)
         method = "landmarks"
     elif args.refine or args.silhouette:  # no points: refine from the images alone, starting from the start rig

@@ -116,9 +116,9 @@ class RecordingLandmarks:
     name: str
     depth_m: np.ndarray
     points: list[Landmark]
-    #: put a landmark whose depth jumps from its neighbourhood onto the surface around it
-    #: (:func:`depth_jump`) instead of leaving it out
-    snap_depth: bool = False
+    #: put a landmark whose depth lies behind the surface beside it onto that surface
+    #: (:func:`depth_jump`; a click just past a leaf's edge reads the ground) -- else leave it out
+    snap_depth: bool = True
 
 
 @dataclass
@@ -472,7 +472,7 @@ def _collect(rig: Rig, recordings: Sequence[RecordingLandmarks], cameras: set[st
                                      "depth_m": float(z), "snapped_to_m": z_snap})
                     z = z_snap
                 elif jump:
-                    z, reason = math.nan, jump + "; left out (--snap-depth puts it on that surface)"
+                    z, reason = math.nan, jump + "; left out (--no-snap-depth)"
             if not np.isfinite(z):
                 rejected.append({"recording": rec.name, "index": li, "note": lm.note,
                                  "depth_uv": [float(v) for v in lm.depth_uv], "reason": reason})
@@ -937,7 +937,7 @@ def load_recording_landmarks(rig: Rig, landmarks: LandmarkSet) -> list[Recording
     return out
 
 
-def fit_rig_from_file(rig: Rig, landmarks: LandmarkSet, snap_depth: bool = False, **kw: Any) -> FitResult:
+def fit_rig_from_file(rig: Rig, landmarks: LandmarkSet, snap_depth: bool = True, **kw: Any) -> FitResult:
     """:func:`fit_rig` on the recordings named in a landmarks file (checked against ``rig``);
     ``snap_depth``: see :attr:`RecordingLandmarks.snap_depth`."""
     landmarks.check(rig)
