@@ -20,7 +20,7 @@ from ..core.errors import Cancelled, PlantregError
 from ..core import signals
 from ..core.signals import Terminated  # noqa: F401 - raised by a terminating signal (docs/errors.md)
 
-SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "recording", "batch")  # modules NAME_cmd
+SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "rig", "recording", "batch")  # modules NAME_cmd
 
 
 class StderrProgress:
