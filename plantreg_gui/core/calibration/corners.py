@@ -122,12 +122,14 @@ def min_spacing(corners: np.ndarray, board: Board) -> float:
                float(np.linalg.norm(np.diff(g, axis=1), axis=2).min()))
 
 
-def refine_corners(gray: np.ndarray, corners: np.ndarray, board: Board, guard: bool = True) -> np.ndarray:
+def refine_corners(gray: np.ndarray, corners: np.ndarray, board: Board, guard: bool = True,
+                   held: list | None = None) -> np.ndarray:
     """Polish chessboard corners (N, 2) with ``cv2.cornerSubPix``, its half-window 40 % of the
     smallest corner spacing in the image (so it never reaches a neighbouring corner). On rendered
     boards with known truth this halves the SB detector's error and removes its ~0.02 px bias.
     With ``guard``, a corner that would move by more than a third of the window keeps its
-    position (without: the classic detector's rough corners, which must move)."""
+    position (without: the classic detector's rough corners, which must move); ``held``, when
+    given, gets the number of corners the guard held."""
     spacing = min_spacing(corners, board)
     w = int(np.clip(0.4 * spacing, 2, 15))
     c = cv2.cornerSubPix(gray.astype(np.float32), corners.reshape(-1, 1, 2).astype(np.float32).copy(), (w, w), (-1, -1),
@@ -135,6 +137,8 @@ def refine_corners(gray: np.ndarray, corners: np.ndarray, board: Board, guard: b
     if guard:
         moved = np.linalg.norm(c - corners, axis=1) > max(1.0, w / 3.0)
         c[moved] = corners[moved]
+        if held is not None:
+            held.append(int(moved.sum()))
     return c
 
 

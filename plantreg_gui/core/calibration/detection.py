@@ -20,7 +20,7 @@ from .board import Board
 FOUND, FAILED, MISSING = "found", "failed", "missing"
 #: Changes whenever detection can give other results for the same image and options: cached
 #: detections (``detections.json``, :class:`~.detect.DetectionCache`) of another version are detected again.
-DETECT_VERSION = 5
+DETECT_VERSION = 6
 DETECTORS = ("auto", "classic")
 #: What :func:`~.variants.detect_image` tries, in this order, until the whole board is found: the scalar
 #: image stretched ("plain"); with its background removed and its local contrast normalised at

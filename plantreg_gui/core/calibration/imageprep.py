@@ -205,7 +205,7 @@ def to_gray(image: np.ndarray, enhance: bool = False) -> np.ndarray:
 #: full resolution) and at least :data:`MIN_SIDE` (tiny thermal images are upscaled first). The
 #: SB detector's time grows with the image's area, but at 640 px the corners refined at full size
 #: on a hand-held foil board (ZED 2i) landed up to 16 px from those found at full size.
-WORK_SIDE = 1280
+WORK_SIDE = 640
 MIN_SIDE = 480
 
 def work_scale(size: tuple[int, int]) -> float:

@@ -128,12 +128,26 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         if s > 1.0:  # upscaled: refine on the upscaled variant image, then back to image px
             c = _to_image_px(refine_corners(img, c, board), s)
         elif s < 1.0:  # downscaled: refine on the full-resolution image (cornerSubPix needs no stretch)
-            c = refine_corners(f if variant in ("plain", "clahe") else _flat_like(f, variant, board), _to_image_px(c, s),
-                               board)
+            held: list[int] = []
+            c0 = _to_image_px(c, s)
+            c = refine_corners(f if variant in ("plain", "clahe") else _flat_like(f, variant, board), c0,
+                               board, held=held)
+            if scale is None and s0 < 1.0 and (held[0] or float(np.linalg.norm(c - c0, axis=1).max()) > 1.0 / s0):
+                # a corner the downscaled image placed off its saddle point (on the ZED 2i's foil
+                # board SB put one up to 16 px off, beside a glint): the guard held it there, or it
+                # moved more than a working pixel; the whole board is detected again at twice the scale
+                again = _detect_chessboard_auto(f, board, enhance, inverted, min(1.0, 2.0 * s0))
+                if again[0] is not None:
+                    return again
         else:
             c = refine_corners(img, c, board)
         return c[perm], variant, s
     s = s0
+    if s < 1.0 and scale is None:  # not found downscaled: at twice the scale, as a board too small for it
+        again = _detect_chessboard_auto(f, board, enhance, inverted, min(1.0, 2.0 * s0))
+        if again[0] is not None:
+            return again
+        tried += [v for v in again[1] if v not in tried]
     if s < 1.0:  # a board too small for the downscaled image
         tried.append("full-res")
         img = _stretch(f)
