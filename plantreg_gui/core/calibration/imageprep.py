@@ -203,8 +203,8 @@ def to_gray(image: np.ndarray, enhance: bool = False) -> np.ndarray:
 
 #: Detection runs on an image whose longer side is at most this (corners are then refined at
 #: full resolution) and at least :data:`MIN_SIDE` (tiny thermal images are upscaled first). The
-#: SB detector's time grows with the image's area, but at 640 px the corners refined at full size
-#: on a hand-held foil board (ZED 2i) landed up to 16 px from those found at full size.
+#: SB detector's time grows with the image's area. A board whose corners do not refine cleanly at
+#: full size is detected again at twice the scale (:func:`~.variants._detect_chessboard_auto`).
 WORK_SIDE = 640
 MIN_SIDE = 480
 
