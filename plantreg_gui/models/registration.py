@@ -105,18 +105,65 @@ def raw_pca(rec: Recording, rig: Rig | None, settings: dict[str, DisplaySettings
     return out
 
 
+def rig_beside(rec_path: Path) -> Path | None:
+    """The ``rig.json`` that goes with a recording folder: in it, or in the folder above (the
+    demo's layout), or None."""
+    for cand in (rec_path / "rig.json", rec_path.parent / "rig.json"):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def recording_for_plant(rig_path: Path | None, plant: str) -> Path | None:
+    """The recording folder of a Plant3DImageReg ``plant`` that ships with a rig:
+    ``<rig folder>/recordings/<plant>`` (resources/plant3dimagereg's layout), or None. Opening the
+    data set's own plant folder shows the raw images only; this recording is what registers."""
+    if rig_path is None:
+        return None
+    rec = Path(rig_path).parent / "recordings" / plant
+    return rec if (rec / MANIFEST).is_file() else None
+
+
+def fit_problem(rig: Rig, rec: Recording) -> str | None:
+    """Why ``rec`` does not fit ``rig`` (Recording.check's message with its file), or None."""
+    try:
+        rec.check(rig)
+    except InputError as e:
+        return str(e)
+    return None
+
+
 def load_job(rig_path: Path | None, rec_path: Path, rig: Rig | None, settings, progress) -> dict:
-    """Read a recording (and its rig when given by path) and render its raw images."""
+    """Read a recording (and its rig when given by path) and render its raw images.
+
+    With the open ``rig`` (``rig_path`` None) a recording that does not fit it is still read:
+    with the ``rig.json`` beside it when that fits (the pair is opened together), else without a
+    rig and ``"misfit"`` saying why, for the window to offer closing the open rig."""
     if rig is None and rig_path is not None:
         rig = Rig.load(rig_path)
     progress(0.05, "reading the recording")
-    rec = Recording.load(rec_path, rig)
-    if rig is not None:
-        rec.check(rig)
+    out: dict[str, Any] = {}
+    if rig is not None and rig_path is None:  # the open rig: read first, then see whether it fits
+        rec = Recording.load(rec_path)
+        why = fit_problem(rig, rec)
+        if why is not None:
+            own = rig_beside(Path(rec_path))
+            own_rig = Rig.load(own) if own is not None else None
+            if own_rig is not None and fit_problem(own_rig, rec) is None:
+                rig, rig_path = own_rig, own
+                out["replaced_rig"] = why
+            else:
+                out["misfit"] = why
+                rig = None
+    else:
+        rec = Recording.load(rec_path, rig)
+        if rig is not None:
+            rec.check(rig)
     layers = raw_layers(rig, rec)
     renders = render_layers(layers, settings, progress.sub(0.6, 1.0))
-    return {"rig": rig, "rig_path": rig_path, "recording": rec, "recording_path": rec_path,
-            "layers": layers, "renders": renders}
+    out.update({"rig": rig, "rig_path": rig_path, "recording": rec, "recording_path": rec_path,
+                "layers": layers, "renders": renders})
+    return out
 
 
 #: Write the demo in a child process: building the scene holds the GIL for seconds in Open3D
@@ -371,10 +418,22 @@ class RegistrationSession:
             self.events.raw.emit()
         self.events.source.emit()
 
+    def close(self) -> None:
+        """File ▸ Close: forget the rig, the recording or plant and the result (display settings stay)."""
+        self.rig = self.rig_path = self.recording = self.recording_path = self.plant = None
+        self.is_demo = False
+        self.pending_target = None
+        self.forget_registration()
+        self.raw, self.raw_renders, self.cursor, self.readout = [], {}, None, ""
+        self.events.raw.emit()
+        self.events.source.emit()
+
     def apply_loaded(self, out: dict) -> None:
-        """A :func:`load_job` / :func:`demo_job` result."""
+        """A :func:`load_job` / :func:`demo_job` result (``"misfit"``: shown without the open rig)."""
         self.plant = None
-        if out["rig"] is not None and out["rig"] is not self.rig:
+        if out.get("misfit"):
+            self.rig = self.rig_path = None
+        elif out["rig"] is not None and out["rig"] is not self.rig:
             self.rig, self.rig_path = out["rig"], out["rig_path"]
         self.recording, self.recording_path = out["recording"], out["recording_path"]
         self.is_demo = bool(out.get("demo"))
@@ -653,4 +712,4 @@ class RegistrationSession:
         return target
 
 
-__all__ = ["Event", "RegistrationSession", "load_job", "demo_job", "register_job", "plant3d_job", "object_box"]
+__all__ = ["Event", "RegistrationSession", "fit_problem", "recording_for_plant", "rig_beside", "load_job", "demo_job", "register_job", "plant3d_job", "object_box"]

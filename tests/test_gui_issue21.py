@@ -1,0 +1,105 @@
+"""Issue 21's workspace defects, driven as the technician drove them (under Xvfb): switching
+between rig/recording pairs, the data set's plants opened through their own folders, File ▸ Close
+and the recent pairs. Each test failed on the code before the fix."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.gui
+
+ROOT = Path(__file__).resolve().parents[1]
+P3D = ROOT / "resources" / "plant3dimagereg"
+
+
+def _wait(pred, timeout: float = 120.0) -> None:
+    from PySide6.QtCore import QEventLoop
+    from PySide6.QtWidgets import QApplication
+
+    t0 = time.monotonic()
+    while not pred():
+        if time.monotonic() - t0 > timeout:
+            pytest.fail("timed out waiting for the workspace")
+        QApplication.processEvents(QEventLoop.ProcessEventsFlag.AllEvents, 10)
+        time.sleep(0.005)
+
+
+def _answer(monkeypatch, yes: bool) -> list:
+    from PySide6.QtWidgets import QMessageBox
+
+    asked = []
+    ans = QMessageBox.StandardButton.Yes if yes else QMessageBox.StandardButton.No
+    monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: asked.append(a[2]) or ans)
+    return asked
+
+
+def test_open_another_rig_offers_to_close_the_recording(registered_workspace, monkeypatch, shared_data):
+    """Defect 1: demo registered, then Open rig of the real plants: was refused naming the old
+    recording's image; now the user is asked, and Yes gives the new rig alone."""
+    ws = registered_workspace
+    asked = _answer(monkeypatch, False)
+    ws.open_rig(P3D / "rig.json")
+    assert len(asked) == 1 and "does not fit this rig" in asked[0]
+    assert ws.rig_path != P3D / "rig.json" and ws.result is not None  # "No" keeps everything
+    asked = _answer(monkeypatch, True)
+    ws.open_rig(P3D / "rig.json")
+    assert ws.rig_path == P3D / "rig.json" and ws.recording is None and ws.result is None
+    assert set(ws.rig.names) == {"ir", "thermal", "hyperspectral"}
+
+
+def test_recording_that_does_not_fit_the_rig_offers_to_close_it(registered_workspace, monkeypatch, shared_data):
+    """Defect 1, the other order: the plant recording opened with the demo rig open."""
+    ws = registered_workspace
+    asked = _answer(monkeypatch, True)
+    ws.open_recording(P3D / "recordings" / "01grapevine")
+    _wait(lambda: not ws.is_busy())
+    assert len(asked) == 1 and "does not fit" in asked[0]
+    assert ws.rig is None and ws.recording_path == P3D / "recordings" / "01grapevine"
+    assert set(ws.raw_grid.views) == {"depth", "ir", "thermal", "hyperspectral"}
+    ws.open_rig(P3D / "rig.json")  # and now the right rig: registrable
+    assert ws.register_button.isEnabled() and ws.session.can_register()
+
+
+def test_dataset_plant_folder_with_the_shipped_rig_registers(workspace, shared_data):
+    """Defect 2: rig open, then the data set's own plant folder: the rig was dropped silently;
+    now the recording shipped beside the rig is opened, and Register is enabled."""
+    ws = workspace
+    ws.open_rig(P3D / "rig.json")
+    ws.open_recording(shared_data / "plant3dimagereg" / "01grapevine")
+    _wait(lambda: not ws.is_busy())
+    assert ws.rig_path == P3D / "rig.json" and ws.plant is None
+    assert ws.recording_path == P3D / "recordings" / "01grapevine"
+    assert ws.register_button.isEnabled()
+
+
+def test_plant_shown_then_rig_opens_its_recording(workspace, shared_data):
+    """Defect 2, plant first: Open rig used to drop the plant and leave Register disabled."""
+    ws = workspace
+    ws.open_plant3d(shared_data / "plant3dimagereg", "04philodendron")
+    _wait(lambda: not ws.is_busy())
+    assert ws.plant is not None and not ws.register_button.isEnabled()
+    ws.open_rig(P3D / "rig.json")
+    _wait(lambda: not ws.is_busy())
+    assert ws.plant is None and ws.recording_path == P3D / "recordings" / "04philodendron"
+    assert ws.rig_path == P3D / "rig.json" and ws.register_button.isEnabled()
+
+
+def test_file_close_and_recent_pair(registered_workspace, demo_dir):
+    """File ▸ Close forgets rig, recording and result; Open recent reopens the pair together."""
+    ws = registered_workspace
+    ws._add_recent("pair", f"{demo_dir / 'rig.json'}|{demo_dir / 'recording'}")
+    assert "Close" in [a.text() for a in ws.file_menu.actions()]
+    ws.close_action.trigger()
+    assert ws.rig is None and ws.recording is None and ws.result is None and not ws.raw
+    assert not ws.register_button.isEnabled() and not ws.export_button.isEnabled()
+    assert not ws.empty_notes["raw"].isHidden()
+    ws._fill_recent()
+    pair = [a for a in ws.recent_menu.actions() if "+" in a.text()]
+    assert pair and "demo/rig.json + demo/recording" in pair[0].text()
+    pair[0].trigger()
+    _wait(lambda: not ws.is_busy())
+    assert ws.rig_path == demo_dir / "rig.json" and ws.recording_path == demo_dir / "recording"
+    assert ws.register_button.isEnabled()
