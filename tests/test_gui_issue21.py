@@ -103,3 +103,37 @@ def test_file_close_and_recent_pair(registered_workspace, demo_dir):
     _wait(lambda: not ws.is_busy())
     assert ws.rig_path == demo_dir / "rig.json" and ws.recording_path == demo_dir / "recording"
     assert ws.register_button.isEnabled()
+
+
+def test_cancel_leaves_the_toolbar_on_the_shown_target(registered_workspace):
+    """Defect 6: after Cancel the Target box named the cancelled camera over the old result."""
+    ws = registered_workspace
+    assert ws.result.target == "ir"
+    ws.session.registrar = None  # rebuild the meshes: long enough to cancel
+    ws.run_registration("rgb")
+    assert ws.target_combo.currentText() == "rgb" and ws.is_busy()
+    ws.cancel()
+    _wait(lambda: not ws.is_busy())
+    assert ws.result.target == "ir" and ws.target_combo.currentText() == "ir"
+
+
+def test_export_into_the_recording_is_refused_before_asking(registered_workspace, monkeypatch, demo_dir):
+    """Defect 7: "exists and is not empty. Replace it?" came first, the refusal only after Yes."""
+    from plantreg_gui.core.errors import InputError
+
+    ws = registered_workspace
+    asked = _answer(monkeypatch, False)
+    with pytest.raises(InputError, match="would replace an input"):
+        ws.export(demo_dir / "recording")
+    assert not asked and not ws.is_busy()
+
+
+def test_redrawn_region_does_not_report_cancelled(registered_workspace):
+    """Defect 8: a region redrawn while the first one's statistics ran left "Region statistics:
+    cancelled." under the valid statistics."""
+    ws = registered_workspace
+    s = ws.session
+    s.set_region("rect", (100.0, 100.0, 400.0, 400.0))
+    s.set_region("rect", (200.0, 150.0, 420.0, 380.0))
+    _wait(lambda: not ws.is_busy())
+    assert s.region_stats is not None and "cancelled" not in ws.readout.text()

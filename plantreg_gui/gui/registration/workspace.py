@@ -140,7 +140,8 @@ class RegistrationWorkspace(QWidget):
             self.rig_path, getattr(self.recording, "folder", None)))
         self.file_menu.addSeparator()
         self.file_menu.addAction("Load demo", lambda: self._guard(self.load_demo))
-        self.export_action = self.file_menu.addAction("Export…", self._ask_export)
+        self.export_action = self.file_menu.addAction("Export…", lambda: self._guard(self._ask_export,
+                                                                                      title="Cannot export"))
         self.export_action.setEnabled(False)
         self.save_view_action = self.file_menu.addAction("Save view as PNG…",
                                                          lambda: self._guard(self._ask_save_view, title="Cannot save"))
@@ -167,7 +168,7 @@ class RegistrationWorkspace(QWidget):
         tb.addSeparator()
         self.export_button = QPushButton("Export…")
         self.export_button.setEnabled(False)
-        self.export_button.clicked.connect(self._ask_export)
+        self.export_button.clicked.connect(lambda: self._guard(self._ask_export, title="Cannot export"))
         tb.addWidget(self.export_button)
         tb.addSeparator()
         self.source_label = QLabel("Open a rig and a recording, drop a folder here, or File ▸ Load demo.")
@@ -512,6 +513,8 @@ class RegistrationWorkspace(QWidget):
     def cancel(self) -> None:
         self.session.pending_target = None
         self._workers.cancel_all()
+        if self.session.result is not None:  # the toolbar names the target of what is shown
+            self.target_combo.setCurrentText(self.session.result.target)
 
     # ------------------------------------------------------------------ export
     def _ask_export(self) -> None:
@@ -538,6 +541,12 @@ class RegistrationWorkspace(QWidget):
             show_error(self, "Nothing to export", "Register the recording first.")
             return False
         out = Path(out)
+        from ...core.export.export import check_output_spares_inputs
+
+        keep = [p for p in (s.rig_path, s.recording_path) if p is not None]
+        if s.recording is not None:
+            keep += [Path(p) for p in s.recording.paths.values()]
+        check_output_spares_inputs(out, keep)  # refused before "Replace it?", not after Yes
         if folder_is_nonempty(out) and not overwrite:
             ans = QMessageBox.question(self, "Replace folder?",
                                        f"{out} exists and is not empty.\nReplace it with this export?",
@@ -772,7 +781,7 @@ class RegistrationWorkspace(QWidget):
     def _run_region_stats(self, job: tuple, token: int) -> None:
         stale = self._stats_worker  # a new region or source: the statistics still running are stale
         if stale is not None and stale in self._workers:
-            stale.cancel()
+            stale.supersede()  # not "cancelled" in the status bar: its successor is running
         w = self._stats_worker = Worker(*job)
         self._start(w, "Region statistics", lambda out: self.session.apply_region_stats(out[0], token),
                     kind="region")
