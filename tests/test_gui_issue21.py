@@ -137,3 +137,32 @@ def test_redrawn_region_does_not_report_cancelled(registered_workspace):
     s.set_region("rect", (200.0, 150.0, 420.0, 380.0))
     _wait(lambda: not ws.is_busy())
     assert s.region_stats is not None and "cancelled" not in ws.readout.text()
+
+
+def test_wrong_files_opened_as_a_rig_are_named_for_what_they_are(workspace, demo_dir, tmp_path):
+    """Defect 9: a session.json was "the rig has no cameras", a PNG "not UTF-8 text (invalid start
+    byte...)", an empty JSON "Expecting value"."""
+    import json
+
+    from plantreg_gui.core.errors import InputError
+    from plantreg_gui.core.io.imageio import write_png
+
+    import numpy as np
+
+    png = tmp_path / "board.png"
+    write_png(png, np.zeros((8, 8, 3), np.uint8))
+    (tmp_path / "empty.json").write_text("")
+    (tmp_path / "broken.json").write_text('{"cameras": [')
+    lm = tmp_path / "landmarks.json"
+    lm.write_text(json.dumps({"format": "plantreg.landmarks", "version": 1, "recordings": {}}))
+    cases = {demo_dir / "calibration" / "session.json": "calibration session",
+             png: "PNG image", tmp_path / "empty.json": "empty", tmp_path / "broken.json": "not valid JSON",
+             lm: "landmarks file"}
+    for path, what in cases.items():
+        with pytest.raises(InputError) as e:
+            workspace.open_rig(path)
+        msg = str(e.value)
+        assert msg.startswith(str(path)) and "not a rig file" in msg and what in msg, msg
+        assert "UTF-8" not in msg and "no cameras" not in msg
+        assert "Expecting value" not in msg or path.name == "broken.json"
+    assert workspace.rig is None

@@ -44,18 +44,50 @@ from .layers import (
 
 
 # ---------------------------------------------------------------------- paths
+#: first bytes of image files someone may pick as a rig by mistake -> what they are
+_IMAGE_MAGIC = ((b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"II*\x00", "a TIFF image"),
+                (b"MM\x00*", "a TIFF image"), (b"\x93NUMPY", "a NumPy array (.npy)"))
+#: "format" of the project's other JSON files -> what they are and where they belong
+_OTHER_FORMATS = {"plantreg.landmarks": "a landmarks file (open it in the Landmarks tab)",
+                  "plantreg.calibration-report": "a calibration report"}
+_RIG_IS = "a rig file is a .json listing the cameras with their intrinsics and extrinsics"
+
+
 def check_is_rig_file(path: Path) -> None:
-    """Refuse a JSON file that is plainly something else (a recording manifest, a session, any JSON)
-    with "not a rig file" rather than a complaint about its missing cameras."""
+    """Refuse a file that is plainly something else (an image, an empty file, a recording
+    manifest, a calibration session, any other JSON) with one line saying what it is, rather than
+    a parser's complaint ("Expecting value", "invalid start byte", "the rig has no cameras")."""
     import json
 
     if not path.is_file():
         return  # Rig.load names the missing file
     try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
+        with open(path, "rb") as f:
+            head = f.read(1 << 20)
+    except OSError:
         return  # Rig.load explains unreadable files
-    if isinstance(d, dict) and "cameras" not in d and d.get("format") != "plantreg.rig":
+    for magic, what in _IMAGE_MAGIC:
+        if head.startswith(magic):
+            raise InputError(f"not a rig file ({what}); {_RIG_IS}", path)
+    if not head.strip():
+        raise InputError(f"not a rig file (the file is empty); {_RIG_IS}", path)
+    try:
+        d = json.loads(head.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise InputError(f"not a rig file (binary data, not JSON text); {_RIG_IS}", path) from None
+    except ValueError as e:
+        if len(head) == 1 << 20:
+            return  # a long file: Rig.load reads and explains it whole
+        raise InputError(f"not a rig file (not valid JSON: {getattr(e, 'msg', e)} at line "
+                         f"{getattr(e, 'lineno', '?')}); {_RIG_IS}", path) from None
+    if not isinstance(d, dict):
+        return  # Rig.load says the top level must be an object
+    if d.get("format") in _OTHER_FORMATS:
+        raise InputError(f"not a rig file ({_OTHER_FORMATS[d['format']]}); {_RIG_IS}", path)
+    if "board" in d and isinstance(d.get("cameras"), dict):
+        raise InputError("not a rig file (a calibration session: open its folder in the Calibration tab, "
+                         "whose last page saves the rig)", path)
+    if "cameras" not in d and d.get("format") != "plantreg.rig":
         what = "a recording manifest" if path.name == MANIFEST else "a JSON file without \"cameras\""
         raise InputError(f"not a rig file ({what}); a rig file lists the cameras with their intrinsics and "
                          "extrinsics", path)
