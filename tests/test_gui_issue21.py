@@ -166,3 +166,77 @@ def test_wrong_files_opened_as_a_rig_are_named_for_what_they_are(workspace, demo
         assert "UTF-8" not in msg and "no cameras" not in msg
         assert "Expecting value" not in msg or path.name == "broken.json"
     assert workspace.rig is None
+
+
+def test_units_come_from_the_rig(workspace, demo_registered):
+    """Defect 4: a camera's ``units`` in the rig were ignored (a thermal camera in kelvin was
+    labelled °C; the infrared's DN and the cube's reflectance appeared nowhere): read-out, colour
+    bar, spectrum axis, region statistics and the point read-out follow the rig."""
+    import numpy as np
+
+    from conftest import workspace_session_outputs
+    from plantreg_gui.models.layers import registered_layers
+
+    loaded, reg = workspace_session_outputs(demo_registered)
+    rig = loaded["rig"]
+    assert rig.camera("ir").extra["units"] == "DN" and rig.camera("hyperspectral").extra["units"] == "reflectance"
+    s = workspace.session
+    s.apply_loaded(loaded)
+    workspace._registered(reg)
+    s.hover("target", 240, 330)
+    assert " DN" in s.readout.split("ir: ")[1].split("   ")[0]
+    assert "reflectance @" in s.readout and s.spectrum[3] == "reflectance"
+    th = s.layer("thermal")
+    assert th.unit == "°C" and s.colour_bar(th)[2] == "°C"
+    # the same camera stated in kelvin: K everywhere, never °C
+    kelvin = rig.camera("thermal")
+    old = dict(kelvin.extra)
+    try:
+        kelvin.extra["units"] = "K"
+        L = next(L for L in registered_layers(reg["result"], rig) if L.name == "thermal")
+        assert L.unit == "K" and L.value_text(240, 330).endswith(" K")
+        assert "°C" not in L.value_text(240, 330)
+    finally:
+        kelvin.extra.clear()
+        kelvin.extra.update(old)
+    s.set_masks_source("thermal")
+    s.set_region("rect", (250.0, 200.0, 400.0, 300.0))
+    from PySide6.QtWidgets import QApplication
+    _wait(lambda: s.region_stats is not None)
+    assert s.region_stats.unit == "°C"
+    assert "°C" in workspace.region_panel.text.text()
+    assert np.isfinite(s.region_stats.mean[0])
+
+
+def test_landmark_page_loo_median_and_recording_names(qtbot, shared_data, tmp_path):
+    """Defect 11: "LOO median" was "-" for every camera with three annotated recordings (the page
+    fitted without leave-one-out; the CLI prints it), and an added recording showed as its
+    absolute path cut after ~25 characters, so the plant could not be told."""
+    import re
+
+    from plantreg_gui.gui.landmarks.page import LandmarkPage
+    from plantreg_gui.models.landmarks import LandmarkSession
+
+    s = LandmarkSession.load(P3D / "rig.json", P3D / "landmarks.json")
+    assert len(s.recording_keys) == 3
+    p = LandmarkPage()
+    qtbot.addWidget(p)
+    p.resize(1280, 700)
+    p.show()
+    p.set_session(s)
+    qtbot.waitUntil(lambda: not p.is_busy(), timeout=300_000)
+    with qtbot.waitSignal(p.fit_done, timeout=120_000):
+        p.fit_button.click()
+    qtbot.waitUntil(lambda: not p.is_busy(), timeout=300_000)
+    row = next(ln for ln in p.report_text.toPlainText().splitlines() if ln.strip().startswith("hyperspectral"))
+    assert re.search(r"\d+\.\d\d\s*$", row), row  # the LOO median, a number
+    s = LandmarkSession.open(P3D / "rig.json", tmp_path / "new_landmarks.json")  # a new file elsewhere
+    s.add_recording(P3D / "recordings" / "01grapevine")
+    key = s.add_recording(P3D / "recordings" / "04philodendron")  # outside the file's folder: absolute
+    p.set_session(s)
+    qtbot.waitUntil(lambda: not p.is_busy(), timeout=300_000)
+    p.recording_combo.setCurrentText(key)
+    assert Path(key).is_absolute() and len(key) > 40
+    assert p.recording_combo.displayed_text().endswith("04philodendron")
+    assert p.recording_combo.toolTip() == key
+    p.shutdown()

@@ -393,7 +393,7 @@ class LandmarkSession:
         def job(progress: Reporter | None = None) -> FitResult:
             if progress is not None:
                 progress(0.0, "fitting the rig to the landmarks")
-            return fit_rig(rig, recs, free=free, loo=False)
+            return fit_rig(rig, recs, free=free)  # leave-one-recording-out when >= 2 recordings
 
         return job
 

@@ -371,7 +371,7 @@ class RegistrationSession:
     summary: str = ""                                          # HTML, see summary_html()
     cursor: tuple[str, int, int] | None = None                # (layer or "target", row, col)
     readout: str = ""
-    spectrum: tuple[np.ndarray, np.ndarray | None, str] | None = None
+    spectrum: tuple[np.ndarray, np.ndarray | None, str, str] | None = None   # values, nm, title, unit
     busy: dict[int, tuple[str, str]] = field(default_factory=dict)   # job id -> (kind, title)
     pending_target: str | None = None
     region: tuple[str, Any] | None = None    # ("rect", (x0, y0, x1, y1)) or ("polygon", [(x, y), ...]), target px
@@ -641,7 +641,7 @@ class RegistrationSession:
             title = f"{where} (raw) at x={col}, y={row}"
         if spec is not None:
             L, s = spec
-            self.spectrum = (s, L.wavelengths, title)  # all NaN = not mapped: the plot says so
+            self.spectrum = (s, L.wavelengths, title, L.unit)  # all NaN = not mapped: the plot says so
         self.cursor = (where, row, col)
         self.events.cursor.emit()
 
