@@ -240,3 +240,32 @@ def test_landmark_page_loo_median_and_recording_names(qtbot, shared_data, tmp_pa
     assert p.recording_combo.displayed_text().endswith("04philodendron")
     assert p.recording_combo.toolTip() == key
     p.shutdown()
+
+
+def test_main_window_fits_half_a_1920_screen_and_a_laptop(qapp, demo_registered):
+    """Defect 12: the minimum size was 1233 x 707 (later 1246 x 632): it fitted neither half of a
+    1920 px screen nor a 1280 x 720 laptop. Measured with a registration shown (long labels,
+    summary, colour bars) on every tab."""
+    from conftest import workspace_session_outputs
+    from plantreg_gui.gui.main_window import MainWindow
+
+    w = MainWindow()
+    w.resize(900, 500)
+    w.show()
+    try:
+        loaded, reg = workspace_session_outputs(demo_registered)
+        w.workspace.session.apply_loaded(loaded)
+        w.workspace._registered(reg)
+        for i in range(w.tabs.count()):
+            w.tabs.setCurrentIndex(i)
+            for key in w.workspace.views:
+                w.workspace.set_view(key)
+                qapp.processEvents()
+                m = w.minimumSizeHint()
+                assert m.width() <= 950 and m.height() <= 640, (w.tabs.tabText(i), key, m.toTuple())
+        w.resize(950, 640)
+        qapp.processEvents()
+        assert w.width() <= 950 and w.height() <= 640
+    finally:
+        w.close()
+        w.deleteLater()

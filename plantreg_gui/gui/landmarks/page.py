@@ -133,7 +133,7 @@ class LandmarkPage(QWidget):
         self.open_button.setToolTip("open a rig and a landmarks file")
         self.open_button.clicked.connect(self._ask_open)
         self.recording_combo = ElideLeftCombo()
-        self.recording_combo.setMinimumContentsLength(18)
+        self.recording_combo.setMinimumContentsLength(11)  # cut at its start (ElideLeftCombo)
         self.recording_combo.currentTextChanged.connect(self._on_recording)
         self.camera_combo = QComboBox()
         self.camera_combo.currentTextChanged.connect(self._on_camera)

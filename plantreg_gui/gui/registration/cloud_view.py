@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
-    QCheckBox, QComboBox, QHBoxLayout, QLabel, QSpinBox, QSplitter, QVBoxLayout, QWidget,
+    QCheckBox, QComboBox, QHBoxLayout, QLabel, QSizePolicy, QSpinBox, QSplitter, QVBoxLayout, QWidget,
 )
 
 from ..plotter3d import Stages, first_frame_held, make_plotter, release_first_frame, repaint
@@ -55,6 +55,8 @@ class CloudView(QWidget):
             top.addWidget(cb)
         top.addStretch(1)
         self.hint = QLabel("Left-click a point to read all its values.")
+        self.hint.setMinimumWidth(10)  # cut on a narrow window, never widens it
+        self.hint.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         top.addWidget(self.hint)
 
         self.host = QWidget()

@@ -368,6 +368,11 @@ class ColourBar(QWidget):
             w.setStyleSheet("font-size: 11px;")
             lay.addWidget(w)
         lay.addStretch(1)
+        # the ramp shrinks with a narrow view (three bars side by side made the window too wide)
+        self.ramp.setScaledContents(True)
+        self.ramp.setMinimumWidth(40)
+        self.ramp.setMaximumWidth(160)
+        self.ramp.setSizePolicy(QSizePolicy.Policy.Preferred, QSizePolicy.Policy.Fixed)
         self.cmap: str | None = None
         self.limits: tuple[float, float] | None = None
         self.hide()

@@ -217,7 +217,7 @@ class RegistrationWorkspace(QWidget):
         sl.addWidget(self.summary, 1)
         self.spectrum.hide()  # shown once a multi-band image is open (an empty plot says nothing)
         self.spectrum_label.hide()
-        side.setMinimumWidth(290)
+        side.setMinimumWidth(270)
         # the side panel scrolls when its groups are taller than the window (a region's spectrum
         # below the cursor's): its content never makes the window taller than the screen
         self.side_scroll = QScrollArea()
@@ -225,7 +225,7 @@ class RegistrationWorkspace(QWidget):
         self.side_scroll.setWidgetResizable(True)
         self.side_scroll.setFrameShape(QFrame.Shape.NoFrame)
         self.side_scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        self.side_scroll.setMinimumWidth(300)
+        self.side_scroll.setMinimumWidth(280)
         self.side_scroll.setMaximumWidth(375)
 
         split = QSplitter(Qt.Orientation.Horizontal)
