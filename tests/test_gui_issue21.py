@@ -269,3 +269,37 @@ def test_main_window_fits_half_a_1920_screen_and_a_laptop(qapp, demo_registered)
     finally:
         w.close()
         w.deleteLater()
+
+
+def test_texts_are_not_cut(qtbot, qapp):
+    """Defect 10: the inverted-limits note was cut ("...not ap"); page 1's headers ("lame (= file
+    name") and modality cells ("ıyperspectral") were cut."""
+    from plantreg_gui.gui.calibration.wizard import CalibrationWizard
+    from plantreg_gui.gui.registration.display_controls import DisplayControls
+
+    dc = DisplayControls()
+    qtbot.addWidget(dc)
+    dc.setFixedWidth(290)
+    dc.show()
+    dc.limits_note.show()
+    dc.adjustSize()
+    for _ in range(3):
+        qapp.processEvents()
+    note = dc.limits_note
+    assert note.wordWrap() and note.heightForWidth(note.width()) <= note.height() + 1
+
+    wz = CalibrationWizard()
+    qtbot.addWidget(wz)
+    wz.resize(950, 640)
+    wz.show()
+    page = wz.pages[0]
+    page._add_camera("hyperspectral", "hyperspectral", "reflectance", "400-1000/100")
+    qapp.processEvents()
+    t = page.cameras
+    fm = t.horizontalHeader().fontMetrics()
+    for col in range(t.columnCount() - 1):  # the last column stretches
+        text = t.horizontalHeaderItem(col).text()
+        assert t.columnWidth(col) >= fm.horizontalAdvance(text), text
+    combo = t.cellWidget(t.rowCount() - 1, 1)
+    assert t.columnWidth(1) >= combo.sizeHint().width()
+    wz.shutdown() if hasattr(wz, "shutdown") else None

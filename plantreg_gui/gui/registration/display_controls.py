@@ -109,6 +109,7 @@ class DisplayControls(QGroupBox):
         form.addRow("", self.lock)
         self.limits_note = QLabel("Lower limit must be below the upper; not applied.")
         self.limits_note.setStyleSheet("color: #a00000; font-size: 11px;")
+        self.limits_note.setWordWrap(True)  # wrapped, never cut ("…not ap") by the side panel's width
         self.limits_note.hide()
         form.addRow("", self.limits_note)
         form.addRow("Cube as", self.mode)
