@@ -303,3 +303,41 @@ def test_texts_are_not_cut(qtbot, qapp):
     combo = t.cellWidget(t.rowCount() - 1, 1)
     assert t.columnWidth(1) >= combo.sizeHint().width()
     wz.shutdown() if hasattr(wz, "shutdown") else None
+
+
+def test_histogram_beside_the_limits_and_3d_colour_bar(registered_workspace, qapp):
+    """New tools: a histogram of the shown layer with its colour limits marked, and the 3D view's
+    colour bar for the layer that colours the points (both absent before)."""
+    import numpy as np
+
+    from plantreg_gui.models.layers import DisplaySettings
+
+    ws = registered_workspace
+    s = ws.session
+    th = s.layer("thermal")
+    ws.controls.layer.setCurrentText("thermal")
+    qapp.processEvents()
+    h = ws.controls.histogram
+    assert not h.isHidden()
+    v = th.data[np.isfinite(th.data)]
+    want_counts, want_edges = np.histogram(v.astype(np.float64), bins=len(h.counts))
+    np.testing.assert_array_equal(h.counts, want_counts)
+    np.testing.assert_allclose(h.edges, want_edges)
+    assert h.limits == pytest.approx(s.colour_bar(th)[1])
+    ws.controls.apply("thermal", DisplaySettings(None, (1.0, 99.0), None, (21.0, 23.0)))
+    ws.controls._show_layer()
+    assert h.limits == (21.0, 23.0) and "limits 21-23 °C" in h.toolTip()
+    ws.controls.layer.setCurrentText("rgb")  # a colour image has no single-value histogram
+    assert h.isHidden()
+
+    cv = ws.cloud_view
+    cv.colour.setCurrentText("thermal")
+    qapp.processEvents()
+    assert not cv.bar.isHidden()
+    cmap, lim, unit = s.colour_bar(s.layer("thermal"))
+    assert cv.bar.cmap == cmap and cv.bar.limits == pytest.approx(lim) and unit == "°C"
+    assert cv.bar.hi.text().endswith("°C")
+    s.set_display("thermal", DisplaySettings(None, (1.0, 99.0), None, (20.0, 24.0)))
+    assert cv.bar.limits == (20.0, 24.0)
+    cv.colour.setCurrentText("rgb")
+    assert cv.bar.isHidden()

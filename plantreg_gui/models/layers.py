@@ -125,6 +125,27 @@ class Layer:
             cache[key] = tuple(float(v) for v in display.auto_limits(self.data, percentiles))
         return cache[key]
 
+    #: at most this many values enter a histogram (a strided sample of a larger image)
+    HIST_SAMPLE = 1 << 18
+
+    def histogram(self, bins: int = 64) -> tuple[np.ndarray, np.ndarray] | None:
+        """(counts (bins,), edges (bins + 1,)) of a single-band layer's finite values (depth:
+        values > 0), over a strided sample of at most :attr:`HIST_SAMPLE` pixels; None for
+        colour and multi-band images or no finite value. Cached per layer."""
+        if self.data.ndim != 2:
+            return None
+        cache = self.__dict__.setdefault("_hist", {})
+        key = (id(self.data), bins)
+        if key not in cache:
+            flat = self.data.reshape(-1)
+            step = max(1, flat.size // self.HIST_SAMPLE)
+            v = np.asarray(flat[::step], dtype=np.float64)
+            v = v[np.isfinite(v)]
+            if _mod.get(self.modality).zero_is_missing:
+                v = v[v > 0]
+            cache[key] = None if v.size == 0 else np.histogram(v, bins=bins)
+        return cache[key]
+
     def value_text(self, row: int, col: int, band: int | None = None) -> str:
         h, w = self.data.shape[:2]
         if not (0 <= row < h and 0 <= col < w):

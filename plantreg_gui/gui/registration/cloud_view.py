@@ -79,6 +79,11 @@ class CloudView(QWidget):
         lay = QVBoxLayout(self)
         lay.setContentsMargins(2, 2, 2, 2)
         lay.addLayout(top)
+        from .image_views import ColourBar
+
+        self.bar = ColourBar()  # the colouring layer's map and limits, as in the 2D views (hidden for RGB)
+        self.bar.setToolTip("colour map and limits of the layer that colours the points")
+        lay.addWidget(self.bar)
         lay.addWidget(split, 1)
         self.colour.currentIndexChanged.connect(self._recolour)
         self.point_size.valueChanged.connect(self._resize_points)
@@ -352,9 +357,18 @@ class CloudView(QWidget):
             note = f"Target {r.target}: object-mesh hits in the rig frame." if r is not None else ""
             self.set_cloud(session.cloud, session.meshes, default=session.colour_layer(), note=note)
 
+        def bar() -> None:
+            name = self.colour.currentText()
+            L = session.layer(name) or session.layer(name, registered=False)
+            if self.cloud is None or L is None:
+                self.bar.set_bar(None, None)
+            else:
+                self.bar.set_bar(*session.colour_bar(L))
+
         def display(name: str) -> None:
             if self.cloud is not None and self.colour.currentText() == name:
                 self._recolour()
+                bar()
 
         def cursor() -> None:  # the 2D cursor's object point, when the session moved it to one
             c = session.cursor
@@ -367,6 +381,8 @@ class CloudView(QWidget):
                 self.show_point(i)
 
         session.events.result.connect(refresh)
+        session.events.result.connect(bar)
+        self.colour.currentIndexChanged.connect(lambda _i: bar())
         session.events.display.connect(display)
         session.events.cursor.connect(cursor)
         return self
