@@ -341,3 +341,35 @@ def test_histogram_beside_the_limits_and_3d_colour_bar(registered_workspace, qap
     assert cv.bar.limits == (20.0, 24.0)
     cv.colour.setCurrentText("rgb")
     assert cv.bar.isHidden()
+
+
+def test_region_shapes_saved_and_loaded(registered_workspace, tmp_path):
+    """New tool: a region drawn on the registered images is saved (shape, target camera and size)
+    and loaded again with the same statistics; a region drawn on another target is refused."""
+    import json
+
+    from plantreg_gui.core.errors import InputError
+
+    ws = registered_workspace
+    s = ws.session
+    poly = [(210.5, 150.0), (420.0, 170.25), (400.0, 380.0), (230.0, 360.0)]
+    s.set_region("polygon", poly)
+    _wait(lambda: s.region_stats is not None and not ws.is_busy())
+    pixels = s.region_stats.pixels
+    p = ws.save_region(tmp_path / "leaf.json")
+    d = json.loads(p.read_text())
+    assert d["format"] == "plantreg.region" and d["target"] == "ir" and d["target_size"] == [640, 576]
+    s.set_region(None)
+    assert s.region is None
+    ws.load_region(p)
+    assert s.region == ("polygon", poly)
+    _wait(lambda: s.region_stats is not None and not ws.is_busy())
+    assert s.region_stats.pixels == pixels
+    view = ws.sbs_grid.views["ir"].view
+    assert view._region.isVisible()
+    d["target"] = "thermal"
+    (tmp_path / "other.json").write_text(json.dumps(d))
+    with pytest.raises(InputError, match="drawn on thermal"):
+        ws.load_region(tmp_path / "other.json")
+    with pytest.raises(InputError, match="not a region file"):
+        ws.load_region(P3D / "rig.json")

@@ -287,6 +287,54 @@ def region_job(result: Any, region: tuple[str, Any], sources: list[str],
     return out
 
 
+REGION_FORMAT = "plantreg.region"
+
+
+def region_to_json(region: tuple[str, Any], target: str, shape: tuple[int, int]) -> str:
+    """A region as a versioned JSON text: kind, geometry in target pixels, and the target camera
+    and its (H, W) size it was drawn on (checked when it is loaded)."""
+    import json
+
+    kind, geom = region
+    g = [float(v) for v in geom] if kind == "rect" else [[float(x), float(y)] for x, y in geom]
+    return json.dumps({"format": REGION_FORMAT, "version": 1, "kind": kind, "shape": g, "target": target,
+                       "target_size": [int(shape[1]), int(shape[0])]}, indent=1) + "\n"
+
+
+def region_from_json(text: str, target: str, shape: tuple[int, int], path: Path | None = None) -> tuple[str, Any]:
+    """The region of :func:`region_to_json`'s text for a result on ``target`` of (H, W) ``shape``;
+    :class:`InputError` (naming ``path``) for another file, another target or size, or a bad shape."""
+    import json
+
+    try:
+        d = json.loads(text)
+    except ValueError as e:
+        raise InputError(f"not a region file (not valid JSON: {getattr(e, 'msg', e)})", path) from None
+    if not isinstance(d, dict) or d.get("format") != REGION_FORMAT:
+        raise InputError(f"not a region file (\"format\" is not \"{REGION_FORMAT}\")", path)
+    if d.get("version") != 1:
+        raise InputError(f"region file version {d.get('version')!r} is not one this plantreg reads (1)", path)
+    w, h = int(shape[1]), int(shape[0])
+    if d.get("target") != target or list(d.get("target_size") or []) != [w, h]:
+        raise InputError(f"the region was drawn on {d.get('target')} ({'x'.join(map(str, d.get('target_size') or []))}), "
+                         f"the result is on {target} ({w}x{h}): register into that camera first", path)
+    kind, g = d.get("kind"), d.get("shape")
+    try:
+        if kind == "rect":
+            geom: Any = tuple(float(v) for v in g)
+            ok = len(geom) == 4
+        elif kind == "polygon":
+            geom = [(float(x), float(y)) for x, y in g]
+            ok = len(geom) >= 3
+        else:
+            ok = False
+    except (TypeError, ValueError):
+        ok = False
+    if not ok or not all(np.isfinite(np.asarray(geom, float)).ravel()):
+        raise InputError("the region's \"kind\" must be rect (4 numbers) or polygon (3 or more [x, y])", path)
+    return kind, geom
+
+
 def region_csv(result: Any, region: tuple[str, Any], sources: list[str], info: dict[str, tuple[Any, str]],
                progress=None) -> str:
     from ..core.registration.region import stats_csv

@@ -143,6 +143,8 @@ class RegistrationWorkspace(QWidget):
         self.export_action = self.file_menu.addAction("Export…", lambda: self._guard(self._ask_export,
                                                                                       title="Cannot export"))
         self.export_action.setEnabled(False)
+        self.file_menu.addAction("Save region…", lambda: self._guard(self._ask_save_region, title="Cannot save"))
+        self.file_menu.addAction("Load region…", lambda: self._guard(self._ask_load_region))
         self.save_view_action = self.file_menu.addAction("Save view as PNG…",
                                                          lambda: self._guard(self._ask_save_view, title="Cannot save"))
         self.save_view_action.setShortcut(QKeySequence("Ctrl+Shift+S"))
@@ -785,6 +787,51 @@ class RegistrationWorkspace(QWidget):
         w = self._stats_worker = Worker(*job)
         self._start(w, "Region statistics", lambda out: self.session.apply_region_stats(out[0], token),
                     kind="region")
+
+    def save_region(self, path: str | Path) -> Path:
+        """Write the drawn region (shape, target camera and size) as JSON; raises without one."""
+        from ...core.io.imageio import atomic_write_text
+        from ...models.registration import region_to_json
+
+        s = self.session
+        if s.region is None or s.result is None:
+            raise InputError("draw a region on the registered images first")
+        path = Path(path)
+        try:
+            atomic_write_text(path, region_to_json(s.region, s.result.target, s.result.shape))
+        except OSError as e:
+            raise InputError(f"cannot write the region ({e.strerror or e})", path) from None
+        self.readout.setText(f"Saved the region to {path}")
+        return path
+
+    def load_region(self, path: str | Path) -> None:
+        """Draw the region saved in ``path`` again (same target camera and size), with its statistics."""
+        from ...models.registration import region_from_json
+
+        s = self.session
+        path = Path(path)
+        if s.result is None:
+            raise InputError("register first: a region is drawn on the registered images", path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            raise InputError(f"cannot read the region file ({getattr(e, 'strerror', None) or e})", path) from None
+        s.set_region(*region_from_json(text, s.result.target, s.result.shape, path))
+        self.set_view("side-by-side")
+
+    def _region_dialog_start(self) -> str:
+        rec = self.session.recording_path
+        return str((rec.parent if rec is not None and not self.session.is_demo else Path.home()) / "region.json")
+
+    def _ask_save_region(self) -> None:
+        p, _ = QFileDialog.getSaveFileName(self, "Save region", self._region_dialog_start(), "Region (*.json)")
+        if p:
+            self.save_region(p if p.lower().endswith(".json") else p + ".json")
+
+    def _ask_load_region(self) -> None:
+        p, _ = QFileDialog.getOpenFileName(self, "Load region", self._region_dialog_start(), "Region (*.json)")
+        if p:
+            self.load_region(p)
 
     def _ask_region_csv(self) -> None:
         job = self.session.region_csv_job()  # raises (shown) without a region
