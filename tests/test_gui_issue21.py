@@ -188,6 +188,11 @@ def test_units_come_from_the_rig(workspace, demo_registered):
     assert "reflectance @" in s.readout and s.spectrum[3] == "reflectance"
     th = s.layer("thermal")
     assert th.unit == "°C" and s.colour_bar(th)[2] == "°C"
+    from plantreg_gui.models.layers import Layer
+    import numpy as np
+
+    rgb8 = Layer("hs", "hyperspectral", np.full((2, 2, 3), 7, np.uint8), None, "8-bit render")
+    assert rgb8.value_text(0, 0) == "(7, 7, 7) 8-bit render"  # a 3-band image: the unit said once
     # the same camera stated in kelvin: K everywhere, never °C
     kelvin = rig.camera("thermal")
     old = dict(kelvin.extra)

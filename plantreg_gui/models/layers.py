@@ -156,7 +156,8 @@ class Layer:
         if display.shows_as_rgb(self.bands, self.modality):  # drawn as RGB (a 3-band cube too): its values
             if not np.all(np.isfinite(px.astype(np.float64))):
                 return "—"
-            return "(" + ", ".join(format_value(float(v), self.modality, self.unit) for v in px) + ")"
+            vals = "(" + ", ".join(format_value(float(v), self.modality, "") for v in px) + ")"
+            return f"{vals} {self.unit}" if self.unit else vals  # the unit once, not per channel
         b = 0 if band is None else int(np.clip(band, 0, self.bands - 1))
         v = float(px[b])
         where = f"{self.wavelengths[b]:.0f} nm" if self.wavelengths is not None else f"band {b}"
