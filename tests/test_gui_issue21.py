@@ -4,7 +4,6 @@ and the recent pairs. Each test failed on the code before the fix."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import pytest
@@ -16,15 +15,9 @@ P3D = ROOT / "resources" / "plant3dimagereg"
 
 
 def _wait(pred, timeout: float = 120.0) -> None:
-    from PySide6.QtCore import QEventLoop
-    from PySide6.QtWidgets import QApplication
+    from test_gui_workspace import _wait as wait  # the event-loop wait of the workspace tests
 
-    t0 = time.monotonic()
-    while not pred():
-        if time.monotonic() - t0 > timeout:
-            pytest.fail("timed out waiting for the workspace")
-        QApplication.processEvents(QEventLoop.ProcessEventsFlag.AllEvents, 10)
-        time.sleep(0.005)
+    wait(None, pred, timeout)
 
 
 def _answer(monkeypatch, yes: bool) -> list:
