@@ -14,8 +14,8 @@ from typing import Any, Callable
 
 import numpy as np
 from PySide6.QtCore import QObject, QStandardPaths, QTimer, Signal, Slot
-from PySide6.QtWidgets import (QHBoxLayout, QLabel, QListWidget, QListWidgetItem, QProgressBar,
-                               QPushButton, QSizePolicy, QStackedWidget, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (QFrame, QHBoxLayout, QLabel, QListWidget, QListWidgetItem, QProgressBar,
+                               QPushButton, QScrollArea, QSizePolicy, QStackedWidget, QVBoxLayout, QWidget)
 
 from ..workers import Worker, show_error
 from . import jobs
@@ -84,7 +84,13 @@ class CalibrationWizard(QWidget):
         self.pages = [cls(self.model, self) for cls in (RigPage, CapturePage, ReviewPage, IntrinsicsPage,
                                                          ExtrinsicsPage, DepthPage, SavePage)]
         for i, p in enumerate(self.pages):
-            self.stack.addWidget(p)
+            # a page wider or taller than the window scrolls: the window fits half a 1920 px
+            # screen or a 1280 x 720 laptop whatever the page's tables need
+            sc = QScrollArea()
+            sc.setWidget(p)
+            sc.setWidgetResizable(True)
+            sc.setFrameShape(QFrame.Shape.NoFrame)
+            self.stack.addWidget(sc)
             QListWidgetItem(f"{i + 1}  {p.title}", self.steps)
         self.steps.currentRowChanged.connect(lambda r: self.go_to_page(r + 1) if r >= 0 else None)
 
