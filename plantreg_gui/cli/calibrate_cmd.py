@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     from ..core.calibration.calibrate import MAX_RMS_PX, quality_problems
     from ..core.calibration.metrics import empty_depth_maps
     from ..core.calibration.report import calibrated_rig, report_files, run_session, write_calibration
-    from ..core.io.imageio import check_output_location
+    from ..core.io.paths import check_output_location
     from ..core.progress import Reporter
 
     session = Session.load(args.session)

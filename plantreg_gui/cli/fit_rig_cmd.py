@@ -30,7 +30,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--rig", required=True, type=Path, metavar="START", help="start rig (plantreg.rig JSON)")
     p.add_argument("--landmarks", required=True, type=Path, metavar="LANDMARKS.json",
                    help="landmarks file (plantreg.landmarks JSON; recording paths relative to it)")
-    p.add_argument("--out", required=True, type=Path, metavar="RIG", help="fitted rig file to write")
+    from . import nonempty_path
+
+    p.add_argument("--out", required=True, type=nonempty_path, metavar="RIG", help="fitted rig file to write")
     p.add_argument("--free", default="", metavar="ITEMS",
                    help="intrinsics to fit: comma-separated focal, principal, k1 (every camera, the depth camera "
                         "included) or CAMERA:ITEM for one camera, e.g. 'focal,ir:k1,ir:principal'")
@@ -52,17 +54,11 @@ def run(args: argparse.Namespace) -> int:
     from .. import cli
     from ..core.data.landmarks import LandmarkSet
     from ..core.camera.rig import Rig
+    from ..core.data.recording import recording_inputs
+    from ..core.io.paths import check_output_location
     from ..core.rigfit.rigfit import fit_rig_from_file, format_report, parse_free
 
     out: Path = args.out
-    if out.exists() and not args.overwrite:
-        raise InputError("output rig file exists (choose another, or pass --overwrite)", out)
-    if out.exists() and out.resolve() == Path(args.landmarks).resolve():
-        raise InputError("--out is the landmarks file; write the rig elsewhere", out)
-    if out.is_dir():
-        raise InputError("output path is a folder, not a file", out)
-    if not out.absolute().parent.is_dir():
-        raise InputError("the folder for the output rig does not exist", out.absolute().parent)
     if args.recording and not (args.refine or args.silhouette):
         raise InputError("--recording adds recordings for --refine or --silhouette; pass one of them too")
     free = parse_free(args.free)
@@ -72,6 +68,10 @@ def run(args: argparse.Namespace) -> int:
     except InputError as e:
         raise InputError(f"{e.detail}; a landmark fit needs the depth camera", args.rig) from None
     landmarks = LandmarkSet.load(args.landmarks)
+    # the output, before the fit: never the start rig, the landmarks or a file of their recordings
+    reads = [f for key in landmarks.recordings for f in recording_inputs(landmarks.folder(key))]
+    reads += [f for folder in args.recording for f in recording_inputs(folder)]
+    check_output_location(out, "output rig", overwrite=args.overwrite, inputs=[args.rig, args.landmarks, *reads])
     if landmarks.count() > 0:
         result = fit_rig_from_file(rig, landmarks, free=free)
         fitted, report, warnings = result.rig, result.report, list(result.warnings)
@@ -127,10 +127,12 @@ def _recordings(args: argparse.Namespace, landmarks, rig) -> tuple[list, dict]:
     relative paths)."""
     from ..core.data.recording import Recording
 
-    folders = [landmarks.folder(k).resolve() for k in landmarks.recordings]
-    folders += [f.resolve() for f in args.recording if f.resolve() not in folders]
+    from ..core.io.paths import resolve
+
+    folders = [resolve(landmarks.folder(k), "recording folder") for k in landmarks.recordings]
+    folders += [f for f in (resolve(d, "--recording") for d in args.recording) if f not in folders]
     recordings = [Recording.load(f, rig) for f in folders]
-    by_folder = {str(landmarks.folder(k).resolve()): pts for k, pts in landmarks.recordings.items()}
+    by_folder = {str(resolve(landmarks.folder(k))): pts for k, pts in landmarks.recordings.items()}
     return recordings, by_folder
 
 

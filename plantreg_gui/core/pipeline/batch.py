@@ -75,10 +75,13 @@ def read_manifest(path: str | Path) -> list[Path]:
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"cannot read the list of recordings ({e})", path) from None
     out: list[Path] = []
-    for row in csv.reader(io.StringIO(text)):
+    rows = csv.reader(io.StringIO(text))
+    for row in rows:
         if not row or not row[0].strip() or row[0].lstrip().startswith("#"):
             continue
         cell = row[0].strip()
+        if "\x00" in cell:
+            raise InputError(f"line {rows.line_num} holds a NUL character, which no folder name can hold", path)
         if not out and cell.lower() in ("recording", "recordings", "path", "folder"):
             continue
         p = Path(cell).expanduser()

@@ -714,7 +714,12 @@ def fit_rig_from_file(rig: Rig, landmarks: LandmarkSet, **kw: Any) -> FitResult:
     """:func:`fit_rig` on the recordings named in a landmarks file (checked against ``rig``)."""
     landmarks.check(rig)
     landmarks.check_recordings()
-    return fit_rig(rig, load_recording_landmarks(rig, landmarks), **kw)
+    try:
+        return fit_rig(rig, load_recording_landmarks(rig, landmarks), **kw)
+    except InputError as e:  # what the landmarks do not determine: named as the landmarks file's problem
+        if e.path is not None or landmarks.path is None or e.detail.startswith("cannot free"):
+            raise
+        raise InputError(e.detail, landmarks.path) from None
 
 
 def format_report(report: dict[str, Any], worst: int = 10) -> str:
