@@ -131,17 +131,10 @@ def check_input_folder(path: str | Path, what: str = "folder") -> Path:
     st = stat_or_none(path, what)
     path = Path(path)
     if st is None:
-        raise InputError(f"{what} not found", path)
+        raise InputError(f"{what} does not exist", path)
     if not stat.S_ISDIR(st.st_mode):
         raise InputError(f"{what} is {_kind(st.st_mode)}, not a folder", path)
     return path
-
-
-def _name_max(folder: Path) -> int:
-    try:
-        return int(os.pathconf(folder, "PC_NAME_MAX"))
-    except (OSError, ValueError):
-        return 255
 
 
 def _nearest_existing(p: Path) -> Path:
@@ -155,7 +148,7 @@ def check_destination(out: str | Path, what: str = "output", *, folder: bool = F
     """The cheap part of :func:`check_output_location`, run by every atomic writer: ``out`` is not
     empty, holds no NUL, is not a symbolic link loop, is not a FIFO, device or socket (renaming
     onto ``/dev/null`` would replace the device itself), not a file where a folder is wanted or
-    vice versa, and its name fits the file system."""
+    vice versa, and its name fits the file system (``lstat`` says ENAMETOOLONG otherwise)."""
     out = check_path_text(out, f"{what} path")
     st = stat_or_none(out, f"{what} path", follow=False)
     if st is not None and stat.S_ISLNK(st.st_mode):
@@ -169,12 +162,6 @@ def check_destination(out: str | Path, what: str = "output", *, folder: bool = F
             raise InputError(f"{what} path exists and is not a folder", out)
         if not folder and stat.S_ISDIR(st.st_mode):
             raise InputError(f"{what} path is a folder, expected a file name", out)
-    base = _nearest_existing(out.parent)
-    limit = _name_max(base if base.is_dir() else base.parent)
-    long = next((part for part in out.parts if len(os.fsencode(part)) > limit), None)
-    if long is not None:
-        raise InputError(f"{what} path has a name of {len(os.fsencode(long))} bytes ('{long[:24]}...'); the file "
-                         f"system allows {limit}", out)
     return out
 
 
