@@ -201,6 +201,8 @@ def test_calibrate_output_that_is_a_fifo_or_a_loop(tmp_path):
     for out, word in ((tmp_path / "fifo.json", "FIFO"), (tmp_path / "loop.json", "symbolic link loop")):
         _refused_unchanged(tmp_path, ["calibrate", tmp_path / "session", "--out", out, "--report",
                                       tmp_path / "r.json", "--quiet", "--overwrite"], out, word)
+        _refused_unchanged(tmp_path, ["calibrate", tmp_path / "session", "--out", tmp_path / "rig.json", "--report",
+                                      out, "--quiet", "--overwrite"], out, word)
 
 
 # ---------------------------------------------------------------------- 4. paths that are not plain
@@ -350,11 +352,21 @@ def test_batch_paths(tmp_path):
         assert words in r.stdout, r.stdout
 
 
+def test_batch_folder_names_equal_but_for_their_unicode_spelling(tmp_path):
+    """"Ärger" typed (one code point) and "Ärger" from a macOS file (A + combining diaeresis) look
+    the same and would be one OUT/<name> folder on macOS: refused as a clash before any work."""
+    rig, rec = _write_inputs(tmp_path)
+    shutil.copytree(rec, tmp_path / "\u00c4rger")
+    shutil.copytree(rec, tmp_path / "A\u0308rger")
+    _refused_unchanged(tmp_path, ["batch", "--rig", rig, "--target", "ir", "--out", tmp_path / "out", "--workers",
+                                  "1", "--quiet", tmp_path / "\u00c4rger", tmp_path / "A\u0308rger"], "out", "clash")
+
+
 # ---------------------------------------------------------------------- 2. one camera-name rule
 @pytest.mark.parametrize("name,words", [
     ("../x", "folder separator"), ("a/b", "folder separator"), ("c" * 65, "65 characters"),
     ("a\tb", "control character"), ("th*", "wildcard"), ("th?", "wildcard"), ("w\u00e4rme", "non-ASCII"),
-    (".hidden", "hidden"), (" ir2", "leading or trailing space")])
+    (".hidden", "hidden"), (" ir2", "leading or trailing space"), ("CON", "device name Windows reserves")])
 def test_recording_create_refuses_what_register_refuses(tmp_path, name, words):
     """The manifest ``recording create`` would write is read back by the loader's own rule."""
     rig, rec = _write_inputs(tmp_path)

@@ -122,6 +122,8 @@ FORBIDDEN_NAME_CHARS = {
     '"': "a quote Windows file names cannot hold", "<": "a shell redirection Windows file names cannot hold",
     ">": "a shell redirection Windows file names cannot hold", "|": "a shell pipe Windows file names cannot hold",
 }
+#: Names Windows reserves for devices (``cases/CON.png`` cannot be made or copied there).
+WINDOWS_DEVICE_NAMES = {"CON", "PRN", "AUX", "NUL", *(f"COM{i}" for i in range(1, 10)), *(f"LPT{i}" for i in range(1, 10))}
 _RULE = "camera names are 1 to 64 ASCII characters without / \\ : * ? \" < > |"
 
 
@@ -154,6 +156,9 @@ def camera_name(v: Any, key: str) -> str:
             why = (f"holds the non-ASCII character {bad!r} (U+{ord(bad):04X}): output file and PLY property names "
                    "would spell it '_', and one letter has several Unicode spellings that look the same")
         raise ValueError(f"{key} {show(v)} {why}; {_RULE}")
+    if file_stem(v).split(".")[0].upper() in WINDOWS_DEVICE_NAMES:
+        raise ValueError(f"{key} {show(v)} is a device name Windows reserves (its output files, e.g. "
+                         f"cases/{file_stem(v)}.png, could not be copied there); {_RULE}")
     if v in (".", "..") or v[0] in ".-" or v != v.strip():
         why = ("starts with '.' (its output files would be hidden)" if v[0] == "." else
                "starts with '-' (it would be read as an option on the command line)" if v[0] == "-" else

@@ -30,6 +30,7 @@ import json
 import os
 import socket
 import time
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -107,7 +108,8 @@ def expand_inputs(items: Iterable[str | Path]) -> list[Path]:
 def plan(recordings: Iterable[str | Path], out: str | Path) -> list[Job]:
     """One :class:`Job` per recording, output folder ``out/<folder name>``. Raises
     :class:`InputError` listing the clashes when two recordings would write the same folder
-    (same name, or names equal but for case: case-insensitive file systems)."""
+    (same name, or names equal but for case -- case-insensitive file systems -- or for their
+    Unicode spelling: "Ä" as one code point or "A" + a combining accent, which look the same)."""
     jobs: list[Job] = []
     seen: dict[str, Path] = {}
     clashes: list[str] = []
@@ -117,7 +119,7 @@ def plan(recordings: Iterable[str | Path], out: str | Path) -> list[Job]:
         if name in (BATCH_CSV,) or name.startswith("."):
             clashes.append(f"{p} (its name '{name}' is reserved in the output folder)")
             continue
-        key = name.lower()
+        key = unicodedata.normalize("NFC", name).casefold()  # "Ä" typed, or "A" + accent from macOS
         if key in seen:
             if seen[key] == p:
                 clashes.append(f"{p} is listed twice")
