@@ -188,7 +188,10 @@ def check_output_location(out: str | Path, what: str = "output", *, folder: bool
             raise InputError(f"the {what} would replace an input of this command ({p}{inside}); choose a location "
                              "outside the inputs (--overwrite never replaces an input)", out)
     if folder and not into:
-        cwd = _resolved_or_none(os.getcwd())
+        try:
+            cwd = _resolved_or_none(os.getcwd())
+        except OSError:  # the current folder was removed: it cannot be the output
+            cwd = None
         if cwd is not None and (out_r == cwd or out_r in cwd.parents):
             raise InputError(f"the {what} folder is the current folder or holds it; plantreg replaces its output "
                              "folder as a whole: name a new folder (e.g. out)", out)
