@@ -243,3 +243,26 @@ def test_depth_table_is_near_zero_without_tof_bias(tmp_path):
     # within 1 mm: the board poses are estimated jointly with the lamp-heated thermal camera
     assert all(abs(b) < 1.0 for b in out[0.0].depth_bias_mm.values()), out[0.0].depth_bias_mm
     assert all(abs(b - 6.0) < 1.0 for b in out[6.0].depth_bias_mm.values()), out[6.0].depth_bias_mm
+
+
+def test_grid_irregularity_tells_a_misplaced_corner_from_perspective_and_distortion():
+    """A steep view through a strongly distorting lens keeps its grid lines smooth; one corner
+    pulled a square away (a glint on a foil square) does not (detect.MAX_IRREGULARITY)."""
+    from plantreg_gui.core.calibration.board import Board
+    from plantreg_gui.core.calibration.detect import MAX_IRREGULARITY, grid_irregularity
+
+    board = Board("chessboard", 4, 6, 0.055)
+    obj = board.object_points().astype(np.float64)
+    K = np.array([[160.0, 0, 60], [0, 160.0, 80], [0, 0, 1]])
+    worst_real = 0.0
+    for tilt in (0, 30, 50):
+        for k1 in (0.0, -0.4):
+            rv = np.array([np.radians(tilt), np.radians(tilt / 2), 0.3])
+            uv = cv2.projectPoints(obj, rv, np.array([-0.1, -0.15, 0.6]), K, np.array([k1, 0.9 * abs(k1), 0, 0]))[0]
+            uv = uv.reshape(-1, 2)
+            worst_real = max(worst_real, grid_irregularity(uv, board))
+            bad = uv.copy()
+            g = bad.reshape(6, 4, 2)
+            g[5, 0] -= g[5, 1] - g[5, 0]  # the corner one square further out
+            assert grid_irregularity(bad, board) > MAX_IRREGULARITY
+    assert worst_real < MAX_IRREGULARITY, worst_real

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 
+import cv2
 import numpy as np
 import pytest
 
@@ -59,19 +60,68 @@ def test_herrera_symmetric_board_against_the_published_calibration(herrera_run, 
         assert report["uncertainty"][cam]["lens_model"]["reason"]
 
 
-def test_lepton_zed_symmetric_board_is_calibrated_or_refused_with_reasons(shared_data, tmp_path, capsys):
+def _opencv_repository_pipeline(session) -> dict:
+    """The set's own repository's pipeline (its stereo_calibrate.py), plain OpenCV on the same
+    pairs: findChessboardCorners, cornerSubPix (5 px thermal, 11 px ZED), calibrateCamera per
+    camera, stereoCalibrate with the intrinsics fixed. Returns its RMS figures and baseline (m)."""
+    obj = np.zeros((24, 3), np.float32)
+    obj[:, :2] = np.indices((4, 6)).T.reshape(-1, 2) * 0.055
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.001)
+    pts = {"thermal": [], "rgb": []}
+    for pose in sorted(p for p in session.iterdir() if p.is_dir()):
+        found = {}
+        for cam, ext, win in (("thermal", "png", 5), ("rgb", "jpg", 11)):
+            g = cv2.cvtColor(cv2.imread(str(pose / f"{cam}.{ext}")), cv2.COLOR_BGR2GRAY)
+            ok, c = cv2.findChessboardCorners(g, (4, 6), None)
+            if ok:
+                found[cam] = cv2.cornerSubPix(g, c, (win, win), (-1, -1), crit)
+        if len(found) == 2:
+            for cam in pts:
+                pts[cam].append(found[cam])
+    objs = [obj] * len(pts["rgb"])
+    rt = cv2.calibrateCamera(objs, pts["thermal"], (120, 160), None, None)
+    rz = cv2.calibrateCamera(objs, pts["rgb"], (1280, 720), None, None)
+    st = cv2.stereoCalibrate(objs, pts["thermal"], pts["rgb"], rt[1], rt[2], rz[1], rz[2], (1280, 720),
+                             criteria=crit, flags=cv2.CALIB_FIX_INTRINSIC)
+    R, T = st[5], st[6].ravel()
+    cams = {"thermal": (rt[1], rt[2], pts["thermal"]), "rgb": (rz[1], rz[2], pts["rgb"])}
+    rel = {("thermal", "rgb"): (R, T), ("rgb", "thermal"): (R.T, -R.T @ T)}
+    epi = {}
+    for (o, t), (R_to, t_to) in rel.items():  # mean distance to the epipolar line, target's undistorted px
+        E = np.array([[0, -t_to[2], t_to[1]], [t_to[2], 0, -t_to[0]], [-t_to[1], t_to[0], 0]]) @ R_to
+        Ko, Do, uo = cams[o]
+        Kt, Dt, ut = cams[t]
+        d = []
+        for a, b in zip(uo, ut):
+            xo = np.c_[cv2.undistortPoints(a, Ko, Do).reshape(-1, 2), np.ones(len(a))]
+            xt = np.c_[cv2.undistortPoints(b, Kt, Dt).reshape(-1, 2), np.ones(len(b))]
+            lines = (xo @ E.T) @ np.linalg.inv(Kt)
+            pt = xt @ Kt.T
+            d.append(np.abs(np.sum(lines * pt, axis=1)) / np.linalg.norm(lines[:, :2], axis=1))
+        epi[(o, t)] = float(np.mean(np.concatenate(d)))
+    return {"rgb_rms": rz[0], "stereo_rms": st[0], "baseline_m": float(np.linalg.norm(T)), "pairs": len(objs),
+            "epipolar_px": epi}
+
+
+def test_lepton_zed_calibrates_to_opencvs_figures_and_reports_its_uncertainty(shared_data, tmp_path, capsys):
     """The 4 x 6 board is symmetric and the thermal images are turned by 90 degrees: the views'
-    corner orders are resolved against the rig. With the current detector the ZED's corners are
-    ~2 px noisy and hand-held pairs are not simultaneous: either the calibration passes, or it
-    is refused naming the camera and what is wrong, writes nothing, and --accept-uncertain keeps
-    it with the flag and the uncertainty in the rig and the report."""
+    corner orders are resolved against the rig. With the default --max-rms the ZED's corners must
+    fit as well as plain OpenCV's (a glinting foil square pulled OpenCV's SB detector's corner up
+    to 60 px off on 5 of 68 views: 2.14 px before), every thermal view must be found, and the
+    relative pose must agree with OpenCV's stereoCalibrate on the same pairs (baseline: the set's
+    README says ~110 mm, but the repository's own pipeline gives 73 mm; so does ours, and so does
+    stereoCalibrate on our ordered corners, 73.4 mm; 69 mm with the one ZED view OpenCV finds
+    and we do not). The pairs are hand-held and only
+    approximately simultaneous, so the thermal camera's residuals in the joint fit are ~3x its
+    own and its pose is uncertain (~0.9 deg); such a rig is refused naming the camera and the
+    figure, writes nothing, and --accept-uncertain keeps it with the flag."""
     s = lepton_session(shared_data, tmp_path / "session")
     out = tmp_path / "out"
     out.mkdir()
-    args = ["calibrate", str(s), "--out", str(out / "rig.json"), "--report", str(out / "report.json"), "--quiet",
-            "--max-rms", "3"]
+    args = ["calibrate", str(s), "--out", str(out / "rig.json"), "--report", str(out / "report.json"), "--quiet"]
     code = main(args)
     err = capsys.readouterr().err
+    assert "RMS error" not in err and "disagree" not in err, err  # no quality failure at the default limits
     if code != 0:
         assert list(out.iterdir()) == [] and "Traceback" not in err
         assert "camera 'rgb'" in err or "camera 'thermal'" in err
@@ -83,9 +133,19 @@ def test_lepton_zed_symmetric_board_is_calibrated_or_refused_with_reasons(shared
         assert json.loads((out / "report.json").read_text())["accepted_uncertain"]
     rig = Rig.load(out / "rig.json")
     report = json.loads((out / "report.json").read_text())
+    ref = _opencv_repository_pipeline(s)
+    assert report["detection"]["cameras"]["thermal"]["found"] >= 66
     u = report["uncertainty"]["thermal"]
     assert u["rotation_sigma_deg"] > 0 and u["translation_sigma_mm"] > 0
-    # OpenCV's stereoCalibrate: thermal fx ~167 px, baseline ~110 mm (a plausibility check)
+    # the ZED fits its corners no worse than OpenCV's plain pipeline its own
+    assert rig.extra["calibration"]["cameras"]["rgb"]["rms_px"] <= ref["rgb_rms"]
+    # the relative pose: epipolar errors (both directions, each in the target's pixels) no worse than
+    # those of OpenCV's stereoCalibrate pose on its own corners (its reprojection RMS, ~1.5 px, is
+    # another measure: thermal -> ZED lines are in ZED pixels, 5.7 to a thermal pixel); the
+    # baseline within 3 of our reported sigmas of OpenCV's (which moves by 4 mm with one view more)
+    for (o, t), px in ref["epipolar_px"].items():
+        assert report["extrinsic"][o][t]["px"] <= px, (o, t, report["extrinsic"][o][t], ref)
+    dt_mm = 1000 * abs(np.linalg.norm(rig.camera("thermal").center_rig) - ref["baseline_m"])
+    assert dt_mm < 3 * u["translation_sigma_mm"], (dt_mm, u["translation_sigma_mm"], ref)
     th = rig.camera("thermal")
-    assert 130 < th.K[0, 0] < 200
-    assert 0.05 < np.linalg.norm(th.center_rig) < 0.2
+    assert 130 < th.K[0, 0] < 200  # OpenCV: ~158 px on these views

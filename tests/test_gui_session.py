@@ -414,3 +414,38 @@ def test_mixed_edge_pixels_are_a_mask_layer(registered_workspace):
     cb.setChecked(True)
     shown = mv.view.displayed()
     assert np.all(shown[r.mixed[src]] == (255, 40, 40))
+
+
+def test_wizard_review_choices_leave_a_read_only_session_folder_untouched(tmp_path):
+    """The wizard's page, exclusions and per-image options are saved in session.json only where
+    the folder has write bits (the detection cache's rule): a folder the user made read-only is
+    not changed by looking at it, also when the user is root."""
+    import os
+    import stat
+
+    from plantreg_gui.core.calibration import Board, Session
+    from plantreg_gui.core.calibration.detect import DetectOptions
+    from plantreg_gui.models.calibration import WizardModel
+
+    folder = tmp_path / "session"
+    s = Session.create(folder, Board("chessboard", 9, 6, 0.03), {"rgb": "rgb", "thermal": "thermal"})
+    before = (folder / "session.json").read_bytes()
+    mode = folder.stat().st_mode
+    os.chmod(folder, mode & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
+    try:
+        m = WizardModel()
+        m.set_session(Session.load(folder))
+        m.set_wizard_page(4)
+        m.set_excluded_many({("pose_01", "rgb")}, True)
+        m.set_options(("pose_01", "thermal"), DetectOptions(invert=False, enhance=True))
+        assert (folder / "session.json").read_bytes() == before
+        assert m.excluded == {("pose_01", "rgb")}  # the choices hold for this run
+    finally:
+        os.chmod(folder, mode)
+    # a writable session keeps them, so that it reopens where it was left
+    m = WizardModel()
+    m.set_session(Session.load(folder))
+    m.set_wizard_page(4)
+    m.set_excluded_many({("pose_01", "rgb")}, True)
+    review = Session.load(folder).review
+    assert review["wizard_page"] == 4 and review["excluded"] == ["pose_01:rgb"]

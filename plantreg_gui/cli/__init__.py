@@ -18,7 +18,7 @@ from .. import __version__, prefer_one_blas_thread
 prefer_one_blas_thread()  # before numpy is first imported (the subcommands import it)
 from ..core.errors import Cancelled, PlantregError
 
-SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "recording", "batch")  # modules NAME_cmd
+SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "rig", "recording", "batch")  # modules NAME_cmd
 
 
 class StderrProgress:

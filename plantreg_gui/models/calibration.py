@@ -133,6 +133,10 @@ class WizardModel:
             self._save_review()
 
     def _save_review(self) -> None:
+        # a folder without write bits is one the user did not ask to change (the rule of the
+        # detection cache): the choices hold for this run only
+        if not self.session.writable():
+            return
         try:
             self.session.save()
         except OSError:

@@ -48,14 +48,14 @@ import numpy as np
 
 from ..camera import modality as _modality
 from ..errors import InputError, PlantregError
-from ..io.imageio import atomic_write_text, read_image
+from ..io.imageio import atomic_write_text, has_write_bits, read_image
 from ..progress import Reporter, ensure_reporter
 from .board import Board
 
 FOUND, FAILED, MISSING = "found", "failed", "missing"
 #: Changes whenever detection can give other results for the same image and options: cached
 #: detections (``detections.json``, :class:`DetectionCache`) of another version are detected again.
-DETECT_VERSION = 3
+DETECT_VERSION = 4
 DETECTORS = ("auto", "classic")
 
 
@@ -499,6 +499,30 @@ def _saddles_ok(img: np.ndarray, corners: np.ndarray, board: Board, min_share: f
     return float(saddle.mean()) >= min_share
 
 
+#: a grid whose corner leaves the line of its neighbours by more than this share of their spacing
+#: may have a corner that is not where the detector put it (a glinting foil square pulled SB's
+#: corner onto the board's edge, 60 px away: 0.45-0.95 on the ZED 2i views); correct grids on the
+#: real sets reach 0.37 (a steep hand-held view; the Lepton's k1 = -0.4: 0.30). Only a choice
+#: between two detectors' grids, never a refusal.
+MAX_IRREGULARITY = 0.4
+
+
+def grid_irregularity(corners: np.ndarray, board: Board) -> float:
+    """The largest second difference of the chessboard grid ``corners`` (N, 2) along its rows and
+    columns, relative to the local corner spacing: ~0.1-0.3 for a real lens, ~1 for a corner
+    that sits a square away from its place."""
+    g = np.asarray(corners, np.float64).reshape(board.rows, board.columns, 2)
+    worst = 0.0
+    for a in (0, 1):
+        if g.shape[a] < 3:
+            continue
+        gg = np.moveaxis(g, a, 0)
+        d2 = np.linalg.norm(gg[:-2] - 2 * gg[1:-1] + gg[2:], axis=-1)
+        span = np.linalg.norm(gg[2:] - gg[:-2], axis=-1) / 2.0
+        worst = max(worst, float(np.max(d2 / np.maximum(span, 1e-9))))
+    return worst
+
+
 def _settle_classic(img: np.ndarray, corners: np.ndarray, board: Board) -> np.ndarray | None:
     """The classic detector's corners (the quads' corners, ~1 px off) moved onto the saddle
     points; None when one would move further than a fifth of the corner spacing (at least 2 px):
@@ -564,6 +588,15 @@ def _detect_chessboard_auto(f: np.ndarray, board: Board, enhance: bool, inverted
         c, how = _find_any(img, board.pattern_size, thorough, sb_first=True)
         if c is None or not _saddles_ok(hp_w, c, board):
             continue
+        if how == "sb" and grid_irregularity(c, board) > MAX_IRREGULARITY:
+            # a corner off its grid line: the classic detector's grid when it is the regular one
+            c2, how2 = _find_any(img, board.pattern_size, False)
+            if how2 == "classic" and _saddles_ok(hp_w, c2, board) \
+                    and grid_irregularity(c2, board) < grid_irregularity(c, board):
+                # settled on the saddle points; on a glinting foil square a free refinement
+                # wanders, then each corner moves only as far as the guard lets it
+                c2s = _settle_classic(img, c2, board)
+                c, how = (c2s if c2s is not None else refine_corners(img, c2, board)), "classic, regular grid"
         perm = canonical_permutation(c, img if variant != "clahe" else plain_w, board, inverted)
         # refined on the image that found them: on rendered lamp-heated boards with known truth the
         # flattened image gives smaller corner errors than the raw scalar (whose lamp gradient
@@ -1011,11 +1044,7 @@ class DetectionCache:
         """Write the file atomically if anything changed; False when the folder is not writable."""
         if not self.dirty:
             return True
-        folder = self.path.parent
-        try:  # a folder without write bits stays untouched, also for root (who may write anyway)
-            if not folder.stat().st_mode & 0o222:
-                return False
-        except OSError:
+        if not has_write_bits(self.path.parent):  # untouched, also for root (who may write anyway)
             return False
         known = {f"{p.name}:{c}" for p in self.session.poses for c in p.images}
         images = {k: v for k, v in sorted(self.entries.items()) if k in known}

@@ -25,7 +25,7 @@ from typing import Any
 
 from ..camera import modality
 from ..errors import InputError
-from ..io.imageio import IMAGE_SUFFIXES, atomic_write_text, read_json
+from ..io.imageio import IMAGE_SUFFIXES, atomic_write_text, has_write_bits, read_json
 from .board import Board
 
 SESSION_FILE = "session.json"
@@ -285,6 +285,12 @@ class Session:
         for k, v in self.extra.items():
             d.setdefault(k, v)
         return d
+
+    def writable(self) -> bool:
+        """Whether the session folder may be written without being asked: it has write bits
+        (also for root, who may write anyway). Derived files (``detections.json``) and the
+        wizard's review state follow this; an explicit save does not ask."""
+        return has_write_bits(self.folder)
 
     def save(self) -> None:
         """Write ``session.json`` atomically (board, cameras, depth, review)."""

@@ -516,6 +516,15 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         raise
 
 
+def has_write_bits(folder: str | Path) -> bool:
+    """Whether ``folder`` has any write bit set (False when it cannot be examined). A folder the
+    user made read-only is left untouched also by root."""
+    try:
+        return bool(Path(folder).stat().st_mode & 0o222)
+    except OSError:
+        return False
+
+
 def atomic_write_text(path: str | Path, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")

@@ -335,15 +335,17 @@ class UncertaintyMap(_Chart):
             gh, gw = sig.shape
             title_h = 2 * fm.height() + 6
             aspect = m.get("aspect", gw / gh)
-            avail_w, avail_h = cw - 16, ch - title_h - 10
+            lim = float(m["limit"])
+            # this camera's colour bar (the colours are relative to its own limit): bar + tick labels
+            bar_w = 10 + 6 + fm.horizontalAdvance(f"≥{lim:.2f}") + 4
+            avail_w, avail_h = cw - 16 - bar_w, ch - title_h - 10 - fm.height()
             pw = min(avail_w, avail_h * aspect)
             ph = pw / aspect
-            left, top = x0 + (cw - pw) / 2, y0 + title_h + 4
+            left, top = x0 + (cw - pw - bar_w) / 2, y0 + title_h + 4
             p.setPen(QColor("#222222"))
             for li, line in enumerate(str(m["title"]).split("\n")[:2]):  # two lines, each elided to fit
                 p.drawText(QRectF(x0 + 4, y0 + 2 + li * fm.height(), cw - 8, fm.height()), Qt.AlignmentFlag.AlignLeft,
                            fm.elidedText(line, Qt.TextElideMode.ElideRight, int(cw - 8)))
-            lim = float(m["limit"])
             worst = set(np.argsort(-sig.ravel())[:3].tolist())
             sx, sy = pw / gw, ph / gh
             for i in range(gh):
@@ -362,3 +364,29 @@ class UncertaintyMap(_Chart):
             p.setPen(QPen(QColor("#333333"), 1))
             p.setBrush(Qt.BrushStyle.NoBrush)
             p.drawRect(QRectF(left, top, pw, ph))
+            self._colour_bar(p, QRectF(left + pw + 8, top, 10, ph), lim)
+            p.setPen(QColor("#333333"))
+            p.drawText(QRectF(left, top + ph + 2, pw + bar_w, fm.height()), Qt.AlignmentFlag.AlignLeft,
+                       fm.elidedText("σ px, colours to this camera's limit; hatched: no board seen",
+                                     Qt.TextElideMode.ElideRight, int(pw + bar_w)))
+
+    @staticmethod
+    def _colour_bar(p: QPainter, r: QRectF, lim: float) -> None:
+        """A vertical colour bar in ``r``: 0 px at the bottom, the camera's limit ``lim`` (px) and
+        above at the top, with its ticks labelled in px."""
+        steps = max(2, int(r.height()))
+        for k in range(steps):
+            t = k / (steps - 1)
+            p.fillRect(QRectF(r.left(), r.bottom() - (k + 1) * r.height() / steps, r.width(),
+                              r.height() / steps + 0.5), _sigma_colour(t))
+        p.setPen(QPen(QColor("#333333"), 1))
+        p.drawRect(r)
+        fm = p.fontMetrics()
+        if not (lim > 0 and math.isfinite(lim)):
+            return
+        for frac, text in ((0.0, "0"), (0.5, f"{lim / 2:.2f}"), (1.0, f"≥{lim:.2f}")):
+            y = r.bottom() - frac * r.height()
+            p.drawLine(QPointF(r.right(), y), QPointF(r.right() + 3, y))
+            ty = min(max(y - fm.height() / 2, r.top() - fm.height() / 2), r.bottom() - fm.height() / 2)
+            p.drawText(QRectF(r.right() + 5, ty, fm.horizontalAdvance(text) + 2, fm.height()),
+                       Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignVCenter, text)
