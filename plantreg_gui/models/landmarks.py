@@ -449,7 +449,7 @@ class LandmarkSession:
         """A routine ``(progress=Reporter) -> RefineResult`` (core/rigfit/refine.py) on copies, over
         every recording of the session, checked against the landmarks.
 
-        ``in_process``: run the refinement in a child process (:func:`~.procs.call_in_process`;
+        ``in_process``: run the refinement in a child process (:func:`~.process_job.call_in_process`;
         the routine must be picklable). For the desktop app: on threads, the refinement's camera
         threads hold the GIL for stretches (GUI-thread gaps while it runs) and notice a cancel only
         at their next cancellation point (seconds apart on the real plants); a child is stopped at once."""
@@ -467,7 +467,7 @@ class LandmarkSession:
 
         def job(progress: Reporter | None = None) -> Any:
             if in_process:
-                from ..core.jobs.procs import call_in_process
+                from ..core.jobs.process_job import call_in_process
 
                 return call_in_process(fn, rig, recs, cameras=cameras, free=free, landmarks=lms,
                                        progress=progress, **kw)

@@ -790,14 +790,12 @@ def worker_count(n_jobs: int) -> int:
 
 
 def _pool_init() -> None:
-    """In each detection process: Ctrl-C and a closed terminal reach the whole process group;
-    the parent decides (and terminates the workers), so the workers ignore them. One OpenCV
+    """In each detection process: the CLI's signal handling (core/jobs/signals.py: a signal to the
+    process group ends a worker quietly; the parent decides what the run does). One OpenCV
     thread each: the processes already use every core."""
-    import signal
+    from .. import signals
 
-    for sig in ("SIGINT", "SIGHUP"):
-        if hasattr(signal, sig):
-            signal.signal(getattr(signal, sig), signal.SIG_IGN)
+    signals.child_init()
     cv2.setNumThreads(1)
 
 
@@ -877,9 +875,9 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
                 yield det, thumb
             ok = True
             return
-        import multiprocessing as mp
+        from .. import signals
 
-        pool = cf.ProcessPoolExecutor(max_workers=n_proc, mp_context=mp.get_context("spawn"), initializer=_pool_init)
+        pool = cf.ProcessPoolExecutor(max_workers=n_proc, mp_context=signals.spawn_context(), initializer=_pool_init)
         clean = False
         try:
             futs = {pool.submit(_detect_one, session, key[0], key[1], opts.get(key), thumbnails, hit, unreadable):
@@ -895,7 +893,9 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
                         det, thumb = fut.result()
                     except cf.process.BrokenProcessPool:
                         from ..errors import PlantregError
+                        from .. import signals
 
+                        signals.check()  # the process group was signalled: say so, not "ended unexpectedly"
                         raise PlantregError("a corner detection process ended unexpectedly (out of memory?)") from None
                     if hit is None and cache is not None and not det.reason.startswith("unreadable image"):
                         cache.put(det, k)
@@ -906,18 +906,14 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
         finally:
             if clean:
                 pool.shutdown(wait=True)
-            else:  # cancelled, an error, or the consumer stopped: no worker may go on
-                procs = list(getattr(pool, "_processes", {}).values())
+            else:  # cancelled, an error, a signal, or the consumer stopped: no worker may go on
+                from .. import signals
+
+                procs = signals.pool_processes(pool)
                 pool.shutdown(wait=False, cancel_futures=True)
                 # a worker may have been started while shutting down: take the list again
-                procs += [p for p in (getattr(pool, "_processes", None) or {}).values() if p not in procs]
-                for proc in procs:
-                    proc.terminate()
-                for proc in procs:
-                    proc.join(2.0)
-                    if proc.is_alive():  # still starting up (spawn) or stuck in native code
-                        proc.kill()
-                        proc.join(2.0)
+                procs += [p for p in signals.pool_processes(pool) if p not in procs]
+                signals.stop_processes(procs, grace_s=2.0)
         ok = True
     finally:
         if cache is not None:

@@ -61,9 +61,12 @@ class EarlyTiffs:
         import threading
         from concurrent.futures import ThreadPoolExecutor
 
-        self._dir = temp_beside(self.out, folder=True)
-        self._stop = threading.Event()
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="plantreg-early")
+        from .. import signals
+
+        with signals.deferred():  # a signal here would leave the folder without __exit__ to remove it
+            self._dir = temp_beside(self.out, folder=True)
+            self._stop = threading.Event()
+            self._pool = ThreadPoolExecutor(1, thread_name_prefix="plantreg-early")
         return self
 
     def __call__(self, cam: str, image: Any) -> None:

@@ -20,7 +20,6 @@ from __future__ import annotations
 import errno
 import os
 import shutil
-import signal
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
@@ -30,6 +29,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, one_line
+from .. import signals
 from .paths import check_destination, check_input_file, check_output_location, temp_beside  # noqa: F401 (the writers' and readers' checks; check_output_location is imported from here too)
 
 #: Still formats OpenCV decodes besides PNG/JPEG/TIFF (thermal and machine-vision cameras write
@@ -476,23 +476,6 @@ def _renamed(e: OSError, tmp: Path, final: Path) -> OSError:
 
 
 @contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """Hold SIGINT/SIGTERM/SIGHUP while a few renames move a complete result into place, so
-    that a signal never lands between moving the old result aside and the new one in."""
-    sigs = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
-    import threading
-
-    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
-@contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success move it into place, on error remove it.
 
@@ -504,7 +487,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     path = check_destination(path)
     tmp: Path | None = None
     try:
-        tmp = temp_beside(path)
+        with signals.deferred():  # a temporary is never created without its name being known here
+            tmp = temp_beside(path)
         yield tmp
         _publish(tmp)
         os.replace(tmp, path)
@@ -577,10 +561,11 @@ def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path
     tmp: Path | None = None
     old: Path | None = None
     try:
-        tmp = temp_beside(out, folder=True)
+        with signals.deferred():
+            tmp = temp_beside(out, folder=True)
         yield tmp
         _publish(tmp, is_dir=True)
-        with _signals_deferred():
+        with signals.deferred():
             if os.path.lexists(out):
                 old = temp_beside(out, folder=True, suffix=".old")
                 os.replace(out, old / "x")
@@ -627,10 +612,11 @@ def atomic_files(paths: list[str | Path], remove: list[str | Path] = ()) -> Iter
         for p in finals:
             current = p
             check_destination(p)
-            tmps[p] = temp_beside(p)
+            with signals.deferred():
+                tmps[p] = temp_beside(p)
         current = None
         yield dict(tmps)
-        with _signals_deferred():
+        with signals.deferred():
             try:
                 for p in finals + stale:
                     current = p

@@ -25,6 +25,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterable
 
+from .. import signals
 from ..errors import InputError
 
 #: Characters of a user's file name kept in a temporary name beside it (the rest of the name is
@@ -206,9 +207,10 @@ def check_output_location(out: str | Path, what: str = "output", *, folder: bool
     if not base.is_dir():
         raise InputError(f"{what} cannot be made: {base} is a file, not a folder", out)
     try:
-        fd, probe = tempfile.mkstemp(prefix=".plantreg-probe.", dir=base)
-        os.close(fd)
-        os.unlink(probe)
+        with signals.deferred():  # the probe is never left behind by a signal
+            fd, probe = tempfile.mkstemp(prefix=".plantreg-probe.", dir=base)
+            os.close(fd)
+            os.unlink(probe)
     except OSError as e:
         raise InputError(f"{what} cannot be written: {base} is not writable ({e.strerror or e})", out) from None
     return out
