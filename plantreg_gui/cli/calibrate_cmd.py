@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     from ..core.calibration.calibrate import MAX_RMS_PX, quality_problems
     from ..core.calibration.metrics import empty_depth_maps
     from ..core.calibration.report import calibrated_rig, report_files, run_session, write_calibration
-    from ..core.io.imageio import check_output_location
+    from ..core.io.paths import check_output_location
     from ..core.progress import Reporter
 
     session = Session.load(args.session)
@@ -126,8 +126,7 @@ def run(args: argparse.Namespace) -> int:
         roi = (lo, hi)
     # every output, checked before the long work: free (or --overwrite), writable, no input among
     # them, and no two of them the same file (--out X/r_intrinsic.csv --report X/r.json)
-    inputs = [session.folder, session.path] + [f for pose in session.poses
-                                               for f in [*pose.images.values(), *([pose.depth] if pose.depth else [])]]
+    inputs = session.inputs()
     outputs = {args.out.absolute(): "--out"}
     for f in report_files(args.report):
         if f.absolute() in outputs:
