@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calsim import board_poses, simulate, true_projection_errors, webcam_rig
+from calsim import board_poses, simulate, true_among_boards_errors, true_projection_errors, webcam_rig
 from plantreg_gui.core.calibration import Board, calibrate
 from plantreg_gui.core.calibration.calibrate import KnownIntrinsics
 
@@ -31,18 +31,26 @@ def _session(seed: int, coverage: str, n_cams: int = 3, board=None, n_poses=None
 def test_projection_uncertainty_covers_the_true_error():
     """On 22 sessions (boards all over the image or in its centre only; 3 cameras each; 12-20
     poses; noise 0.1-0.3 px) the true projection error lies within the reported 2 sigma in 90-98 %
-    of the image points, for the lens model alone and for the camera in the rig. (Fronto-parallel
-    sessions: see the refusal tests.)"""
-    inside_i, inside_r = [], []
+    of the image points, for the lens model alone, for the camera in the rig, and for mrcal's
+    figure (the point fixed among the board poses). (Fronto-parallel sessions: see the refusal
+    tests.)"""
+    inside_i, inside_r, inside_b = [], [], []
     for k, seed in enumerate(range(100, 122)):
-        rig, s, dets, _ = _session(seed, ("spread", "centre")[k % 2])
+        rng = np.random.default_rng(seed)
+        rig = webcam_rig(3, rng)
+        board = Board("chessboard", 9, 6, 0.03)
+        poses = board_poses(rig, board, 12 + seed % 3 * 4, rng, ("spread", "centre")[k % 2])
+        s, dets, _ = simulate(rig, board, poses, rng, noise_px=0.1 + 0.1 * (seed % 3))
         cal = calibrate(s, dets)
         for cam in s.cameras:
             e_i, s_i, e_r, s_r = true_projection_errors(cal, rig, cam)
+            e_b, s_b = true_among_boards_errors(cal, rig, cam, poses)
             inside_i.append(np.mean(e_i <= 2 * s_i))
             inside_r.append(np.mean(e_r <= 2 * s_r))
+            inside_b.append(np.mean(e_b <= 2 * s_b))
     assert 0.90 <= np.mean(inside_i) <= 0.98, np.round(inside_i, 2)
     assert 0.90 <= np.mean(inside_r) <= 0.98, np.round(inside_r, 2)
+    assert 0.90 <= np.mean(inside_b) <= 0.98, np.round(inside_b, 2)
 
 
 @pytest.mark.parametrize("seed", [200, 201, 202])

@@ -561,8 +561,10 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
         w, h = sizes[cam]
         used_uv = [views[cam][p].corners.astype(float) for p in views[cam] if (p, cam) not in outliers]
         dists = [float(np.linalg.norm(init[p][1])) for p in views[cam] if (p, cam) not in outliers]
+        tb = np.array([board_res[p][1] for p in ba.board_order])
         unc[cam] = projection_uncertainty(cam, K, dist, R, t, ba.cov[cam], ba.names[cam], (w, h),
-                                          float(np.median(dists)), used_uv, cam == ref)
+                                          float(np.median(dists)), used_uv, cam == ref,
+                                          (tb, ba.cov_cam_board[cam], ba.cov_board))
         cc = CameraCalibration(cam, session.cameras[cam], w, h, K, dist, rms, float(allr.mean()),
                                dict(sorted(per_view.items())), weak, len(per_view))
         cc.model = intr[cam][3]
