@@ -25,7 +25,9 @@ error says nothing about whether the data determine the model; this does.
 camera's lens-model projection uncertainty, its median over the image
 (``MAX_PROJECTION_SIGMA_MEDIAN``: px, or a fraction of the image diagonal for large images) and its
 worst where the camera saw board corners (``MAX_PROJECTION_SIGMA_COVERED``); a camera's pose relative to the reference
-(``MAX_ROTATION_SIGMA_DEG``, ``MAX_TRANSLATION_SIGMA_MM``).
+by its projection of points fixed in the reference camera's frame (the ``rig`` figure, median,
+``MAX_PROJECTION_SIGMA_MEDIAN``: a rotation traded against the camera's principal point moves
+nothing there) and its translation (``MAX_TRANSLATION_SIGMA_MM``).
 """
 
 from __future__ import annotations
@@ -45,7 +47,6 @@ MAX_PROJECTION_SIGMA_MEDIAN = (1.0, 0.002)
 #: or fraction of the diagonal; outside them the figure is reported, not limited (the corners of
 #: an image nobody put a board in are extrapolation, shown on the heat map)
 MAX_PROJECTION_SIGMA_COVERED = (2.0, 0.004)
-MAX_ROTATION_SIGMA_DEG = 0.25
 MAX_TRANSLATION_SIGMA_MM = 10.0
 #: grid cells along the image's longer side
 GRID_CELLS = 24
@@ -239,10 +240,8 @@ def limits_px(u: CameraUncertainty) -> tuple[float, float]:
     return max(a, fa * u.diagonal), max(b, fb * u.diagonal)
 
 
-def uncertainty_problems(unc: dict[str, CameraUncertainty], max_deg: float | None = None,
-                         max_mm: float | None = None) -> list[str]:
+def uncertainty_problems(unc: dict[str, CameraUncertainty], max_mm: float | None = None) -> list[str]:
     """One sentence per camera whose uncertainty exceeds a limit, naming the parameter."""
-    max_deg = MAX_ROTATION_SIGMA_DEG if max_deg is None else max_deg
     max_mm = MAX_TRANSLATION_SIGMA_MM if max_mm is None else max_mm
     out = []
     for name, u in unc.items():
@@ -259,9 +258,16 @@ def uncertainty_problems(unc: dict[str, CameraUncertainty], max_deg: float | Non
             out.append(f"camera '{name}': projection uncertainty up to {seen:.2f} px where it saw the board (at "
                        f"{u.distance_m:.2f} m) exceeds the limit of {lim_seen:.2f} px; {where}; add board views in the {', '.join(u.add_views)} of the image, "
                        "tilted, at several distances")
-        if u.rotation_deg is not None and (not np.isfinite(u.rotation_deg) or u.rotation_deg > max_deg):
-            out.append(f"camera '{name}': rotation relative to the reference uncertain by +- {u.rotation_deg:.3f} deg "
-                       f"(limit {max_deg:g} deg); record more poses seen by it and the reference camera together")
+        if u.rotation_deg is not None:
+            # the pose judged by what it does where the camera sees: a rotation traded against the
+            # camera's own principal point (a thermal camera's +- 1 deg and +- 2 px) moves nothing
+            rig_med = u.summary("rig")[0]
+            if not np.isfinite(rig_med) or rig_med > lim_med:
+                out.append(f"camera '{name}': its pose relative to the reference (rotation +- {u.rotation_deg:.3f} deg, "
+                           f"translation +- {u.translation_mm:.2f} mm) leaves where it sees points fixed in the "
+                           f"reference camera's frame uncertain by {rig_med:.2f} px (median over the image, at "
+                           f"{u.distance_m:.2f} m), beyond the limit of {lim_med:.2f} px; record more poses seen by it "
+                           "and the reference camera together")
         if u.translation_mm is not None and (not np.isfinite(u.translation_mm) or u.translation_mm > max_mm):
             out.append(f"camera '{name}': translation relative to the reference uncertain by +- {u.translation_mm:.2f} mm "
                        f"(limit {max_mm:g} mm); record more poses seen by it and the reference camera together, "
