@@ -90,8 +90,8 @@ def test_fronto_parallel_session_is_refused_naming_camera_and_parameter(seed):
 @pytest.mark.parametrize("seed", [310, 311, 312, 313])
 def test_few_partial_charuco_views_are_refused_or_right(seed):
     """The kept-back 4-webcam ChArUco failure (exit 0 with poses 4-18 degrees wrong): few, partial
-    views of a small 4 x 5 board near the image centre. Either refused, or every relative pose is
-    within 3 of its reported sigmas of the truth and the principal points are near the truth."""
+    views of a small 4 x 5 board near the image centre. Every camera's pose is either refused by
+    name or within 3 of its reported sigmas of the truth, with its principal point near the truth."""
     board = Board("charuco", 4, 5, 0.05, 0.037, "DICT_4X4_50")
     rng = np.random.default_rng(seed)
     rig = webcam_rig(4, rng)
@@ -100,9 +100,8 @@ def test_few_partial_charuco_views_are_refused_or_right(seed):
     cal = calibrate(s, dets)
     for c in rig.cameras[1:]:
         e, u = cal.rig.camera(c.name), cal.uncertainty[c.name]
-        if cal.uncertainty_problems():
-            assert any(f"camera '{x.name}'" in p for x in rig.cameras for p in cal.uncertainty_problems())
-            continue
+        if any(p.startswith(f"camera '{c.name}': its pose relative to the reference") for p in cal.uncertainty_problems()):
+            continue  # its pose refused by name
         assert _angle_deg(e.R_cam_rig @ c.R_cam_rig.T) < 3 * u.rotation_deg
         assert 1000 * np.linalg.norm(e.t_cam_rig - c.t_cam_rig) < 3 * u.translation_mm
         assert np.abs(e.K[:2, 2] - c.K[:2, 2]).max() < 3 * max(u.std["cx"], u.std["cy"])
