@@ -14,6 +14,12 @@ RGB set (issue 19: plantreg within 5x of OpenCV), both measured in this one run.
 The session is laid out over the read-only set with symlinks in a temporary folder. The
 machine's load (``uptime``) is printed beside each figure: figures on a loaded machine are
 inflated, the ratios less so.
+
+plantreg runs as installed: its modules compiled to bytecode once beforehand, as ``pip install``
+does (into a cache folder in the temporary folder, ``PYTHONPYCACHEPREFIX``). An environment that
+sets ``PYTHONDONTWRITEBYTECODE`` (as this development machine's does) would otherwise make every
+process, and every detection worker, compile ~50 modules from source at each start;
+``--no-bytecode`` measures that case.
 """
 
 from __future__ import annotations
@@ -73,10 +79,22 @@ def opencv_baseline(session: Path, cameras: list[str], pattern: tuple[int, int],
             "stereo_rms": float(rms)}
 
 
+#: the environment plantreg's processes run in (:func:`installed_env`)
+ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def installed_env(cache: Path) -> None:
+    """Run plantreg as installed: bytecode compiled once into ``cache`` (what pip does)."""
+    ENV.pop("PYTHONDONTWRITEBYTECODE", None)
+    ENV["PYTHONPYCACHEPREFIX"] = str(cache)
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "plantreg_gui")], env=ENV, check=True,
+                   capture_output=True)
+
+
 def plantreg_run(session: Path, out: Path, overwrite: bool) -> tuple[float, str]:
     cmd = [sys.executable, "-m", "plantreg_gui", "calibrate", str(session), "--out", str(out / "rig.json"),
            "--report", str(out / "report.json"), "--quiet"] + (["--overwrite"] if overwrite else [])
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = ENV
     t0 = time.perf_counter()
     r = subprocess.run(cmd, capture_output=True, text=True, env=env)
     dt = time.perf_counter() - t0
@@ -86,7 +104,7 @@ def plantreg_run(session: Path, out: Path, overwrite: bool) -> tuple[float, str]
 
 
 def startup() -> float:
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = ENV
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "plantreg_gui", "--version"], capture_output=True, env=env, check=True)
     return time.perf_counter() - t0
@@ -96,6 +114,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data")
     ap.add_argument("--poses", type=int, default=0, help="only the first N poses (0 = all)")
+    ap.add_argument("--no-bytecode", action="store_true",
+                    help="keep the environment's PYTHONDONTWRITEBYTECODE: every process compiles plantreg from source")
     a = ap.parse_args()
     realcal = a.data / "realcal"
     with tempfile.TemporaryDirectory(prefix="bench_calibrate_") as tmp:
@@ -107,6 +127,10 @@ def main() -> None:
         n_img = sum(1 for p in session.iterdir() if p.is_dir() for _ in p.iterdir())
         out = tmp / "out"
         out.mkdir()
+        if not a.no_bytecode:
+            installed_env(tmp / "pycache")
+        print("plantreg's modules: " + ("compiled from source in every process" if a.no_bytecode
+                                        else "bytecode compiled once, as installed"))
         print(f"Herrera set: {n_img} images, cores {os.cpu_count()}")
         print(f"load before: {load()}")
         cv_ = opencv_baseline(session, ["kinect", "external"], (8, 6), 0.040)

@@ -88,3 +88,72 @@ class StallProbe:
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+
+# ---------------------------------------------------------------------- a control for a busy machine
+_CONTROL = """
+import os, sys, time
+flag, worst = sys.argv[1], 0.0
+print("ready", flush=True)
+while not os.path.exists(flag):
+    t0 = time.perf_counter()
+    c0 = time.process_time()
+    while time.process_time() - c0 < 0.02:  # 20 ms of CPU work, like an event-loop slot ...
+        pass
+    time.sleep(0.02)  # ... then idle
+    worst = max(worst, time.perf_counter() - t0 - 0.04)
+print(worst, flush=True)
+"""
+
+
+class LoadControl:
+    """A control measured in the same test, over the same interval as a :class:`StallProbe`: a
+    process of the same priority (no Qt, no GIL shared with the GUI) alternating 20 ms of CPU work
+    and 20 ms of sleep, like an event loop, recording how much longer than 40 ms its worst cycle
+    took (:attr:`worst`, seconds).
+
+    On a machine where other work wants the CPU, every process waits for it: a 20 ms slot that
+    takes 20 + ``worst`` ms says the machine stretched CPU work by ``1 + worst / 0.02`` over this
+    interval (:attr:`stretch`; about 1 on an idle machine). :meth:`allowed` scales a GUI-thread gap
+    goal by it, so a test asserts "no stall beyond what the machine did to everyone" and passes on
+    a busy machine, while a freeze of our own (seconds of work on the GUI thread, a worker holding
+    the GIL) fails it on an idle one. Latency itself is measured by the benchmarks
+    (``benchmarks/bench_gui_stalls.py``, ``bench_wizard_stalls.py``) on an idle machine."""
+
+    def __init__(self) -> None:
+        import subprocess
+        import tempfile
+
+        self._dir = tempfile.mkdtemp(prefix="plantreg-control-")
+        self.flag = f"{self._dir}/stop"
+        self.worst: float | None = None
+        self.proc = subprocess.Popen([sys.executable, "-c", _CONTROL, self.flag], stdout=subprocess.PIPE, text=True)
+        assert self.proc.stdout.readline().strip() == "ready"
+
+    def stop(self) -> float:
+        import shutil
+
+        if self.worst is None:
+            with open(self.flag, "w") as f:
+                f.write("stop")
+            out, _ = self.proc.communicate(timeout=60)
+            self.worst = float(out.strip())
+            shutil.rmtree(self._dir, ignore_errors=True)
+        return self.worst
+
+    @property
+    def stretch(self) -> float:
+        return 1.0 + self.stop() / 0.02
+
+    def allowed(self, goal_s: float) -> float:
+        """``goal_s`` (the gap allowed on an idle machine) at a stretch of 1; beyond, the stretch's
+        excess counts twice: the GUI thread also waits for the GIL hand-overs of its own process's
+        worker threads, which a busy machine slows as well (measured with two CPU hogs at a load
+        of 12 on 2 cores: a stretch of 18, a 3.6 s gap where the goal is 0.2 s)."""
+        return goal_s * (2.0 * self.stretch - 1.0)
+
+    def __enter__(self) -> "LoadControl":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

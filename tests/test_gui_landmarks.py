@@ -22,7 +22,7 @@ from plantreg_gui.core.synthetic import make_plant_scene
 from plantreg_gui.core.synthetic.landmarks import perturb_rig, synthetic_landmarks
 
 CAM = "thermal"
-ALLOWED_GAP_S = 0.5
+ALLOWED_GAP_S = 0.5  # on an idle machine; widened by a control measured alongside (stall_probe.LoadControl)
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +67,7 @@ def page(qtbot, demo, tmp_path):
 
 
 def test_click_pairs_fit_overlay_nudge_save(qtbot, page, demo, tmp_path):
-    from stall_probe import StallProbe
+    from stall_probe import LoadControl, StallProbe
 
     rig, rec, scene = demo
     s = page.session
@@ -99,15 +99,16 @@ def test_click_pairs_fit_overlay_nudge_save(qtbot, page, demo, tmp_path):
     page.undo_button.click()
     assert len(s.points) == 12
 
-    with StallProbe() as probe:
+    with LoadControl() as control, StallProbe() as probe:
         with qtbot.waitSignal(page.fit_done, timeout=120_000):
             page.fit_button.click()
         with qtbot.waitSignal(page.overlay_ready, timeout=300_000):
             pass
     after = unseen_px(rig, s.rig, scene, rec)
-    print(f"fit: unseen residual {before:.1f} -> {after:.2f} px; max GUI gap {probe.max_gap * 1000:.0f} ms")
+    print(f"fit: unseen residual {before:.1f} -> {after:.2f} px; max GUI gap {probe.max_gap * 1000:.0f} ms "
+          f"(control's stretch {control.stretch:.2f})")
     assert before > 10.0 and after < 1.0  # click quantisation averages out over 12 points
-    assert probe.ticks > 5 and probe.max_gap < ALLOWED_GAP_S, probe.stalls(0.2)
+    assert probe.ticks > 5 and probe.max_gap < control.allowed(ALLOWED_GAP_S), probe.stalls(0.2)
     assert page.overlay is not None and page.overlay.mapped.mean() > 0.05
     assert "thermal" in page.report_text.toPlainText()
     # every point's residual is drawn next to it and the table is worst first
@@ -120,14 +121,14 @@ def test_click_pairs_fit_overlay_nudge_save(qtbot, page, demo, tmp_path):
     # nudge with keys: W tilts 0.2 degrees, the overlay is redone on a worker
     page.left.setFocus()
     t0 = s.rig.camera(CAM).R_cam_rig.copy()
-    with StallProbe() as probe:
+    with LoadControl() as control, StallProbe() as probe:
         qtbot.keyClick(page.left, Qt.Key.Key_W)
         qtbot.keyClick(page.left, Qt.Key.Key_W, Qt.KeyboardModifier.ShiftModifier)
         with qtbot.waitSignal(page.overlay_ready, timeout=300_000):
             pass
     dR = s.rig.camera(CAM).R_cam_rig @ t0.T
     assert np.degrees(np.arccos((np.trace(dR) - 1) / 2)) == pytest.approx(1.2, abs=1e-6)
-    assert probe.max_gap < ALLOWED_GAP_S, probe.stalls(0.2)
+    assert probe.max_gap < control.allowed(ALLOWED_GAP_S), probe.stalls(0.2)
     assert unseen_px(rig, s.rig, scene, rec) > 2.0
     with qtbot.waitSignal(page.fit_done, timeout=120_000):
         page.fit_button.click()

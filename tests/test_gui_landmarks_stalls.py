@@ -7,7 +7,8 @@ reads is safe. Refine: runs in a child process (its camera threads no longer com
 GUI thread for the GIL), and Cancel stops it at once.
 
 The thread checks are exact (who called the reader); the stall probe's figure is printed, with
-the generous bound of tests/test_gui_landmarks.py for a shared machine.
+the bound of tests/test_gui_landmarks.py, widened by a control process measured alongside
+(stall_probe.LoadControl) so that a busy machine does not fail it.
 """
 
 import threading
@@ -19,7 +20,7 @@ from plantreg_gui.core.data.recording import Recording
 
 pytestmark = pytest.mark.gui
 
-ALLOWED_GAP_S = 0.5
+ALLOWED_GAP_S = 0.5  # on an idle machine; widened by a control measured alongside (stall_probe.LoadControl)
 
 
 @pytest.fixture
@@ -56,12 +57,12 @@ def _spy(monkeypatch, owner, name, on_gui_thread: list, delay_s: float = 0.0) ->
 
 def test_open_reads_the_recordings_on_a_worker(qtbot, page, demo_dir, tmp_path, monkeypatch):
     import plantreg_gui.gui.landmarks.page as page_module
-    from stall_probe import StallProbe
+    from stall_probe import LoadControl, StallProbe
 
     reads, conversions = [], []
     _spy(monkeypatch, Recording, "load", reads)
     _spy(monkeypatch, page_module, "to_rgb8", conversions)  # the shown images' colouring
-    with StallProbe() as probe:
+    with LoadControl() as control, StallProbe() as probe:
         page.open(demo_dir / "rig.json", tmp_path / "landmarks.json", [demo_dir / "recording"])
         # back at once, and saying that it reads (before: the session was read on return)
         assert page.session is None and not reads
@@ -75,7 +76,7 @@ def test_open_reads_the_recordings_on_a_worker(qtbot, page, demo_dir, tmp_path, 
     assert s.recording_key is not None and s.camera is not None
     assert page.left.array is not None and page.right.array is not None
     assert page.recording_combo.currentText() == s.recording_key and page.fit_button.isEnabled()
-    assert probe.max_gap < ALLOWED_GAP_S, probe.stalls(0.2)
+    assert probe.max_gap < control.allowed(ALLOWED_GAP_S), probe.stalls(0.2)
     # another camera: converted when first chosen, then kept (choosing it again converts nothing)
     other = [c for c in s.camera_names() if c != s.camera][0]
     n = len(conversions)
@@ -123,9 +124,13 @@ def test_closing_or_opening_again_while_reading_is_safe(qtbot, page, demo_dir, t
     assert page.session.landmarks.path == tmp_path / "b.json"
     # closing while reading: shutdown stops the read, and what was read is never shown
     page.open(rig, tmp_path / "d.json", rec)
-    t0 = time.perf_counter()
-    page.shutdown()
-    assert time.perf_counter() - t0 < 10.0
+    from stall_probe import LoadControl
+
+    with LoadControl() as control:
+        t0 = time.perf_counter()
+        page.shutdown()
+        took = time.perf_counter() - t0
+    assert took < control.allowed(10.0)  # a stop, not a wait for the (0.4 s per call) reads
     qtbot.waitUntil(lambda: not page.is_busy(), timeout=60_000)
     qtbot.wait(200)
     assert page.session.landmarks.path == tmp_path / "b.json"

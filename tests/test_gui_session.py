@@ -165,25 +165,24 @@ def test_views_show_the_session(registered_workspace):
 
 @pytest.mark.gui
 def test_registration_keeps_the_gui_thread_responsive(registered_workspace, qtbot):
-    """No GUI-thread gap over 200 ms on an idle machine (issue 11). Tolerance: the limit grows in
-    proportion to the machine's load (1-minute load average per core; 0.2 s at or below 1), because
-    on an overloaded 2-core machine the GUI thread waits for a CPU, not for our code (measured: a
-    load of 14 per core stretches 0.2 s to ~2 s). The freezes this guards against took 1-12 s
-    on an idle machine."""
-    from stall_probe import StallProbe
+    """No GUI-thread gap over 200 ms on an idle machine (issue 11). Tolerance: 0.2 s widened by the
+    stretch a control process of the same priority saw over the same interval
+    (stall_probe.LoadControl), because on a busy machine the GUI thread waits for a CPU, not for
+    our code. (The load average used before lags behind and failed on a busy machine: issue 22.)
+    The freezes this guards against took 1-12 s on an idle machine."""
+    from stall_probe import LoadControl, StallProbe
 
     w = registered_workspace
-    load = os.getloadavg()[0] / (os.cpu_count() or 1)
-    limit = 0.2 * max(1.0, load)
-    with StallProbe(trace_after_s=0.12) as probe:
+    with LoadControl() as control, StallProbe(trace_after_s=0.12) as probe:
         t0 = time.perf_counter()
         w.run_registration("thermal")  # meshes reused: target rays, casts, sampling, rendering, cloud
         qtbot.waitUntil(lambda: w.result.target == "thermal" and not w.is_busy(), timeout=300_000)
         qtbot.wait(100)  # the views' updates after the result
     secs = time.perf_counter() - t0
+    limit = control.allowed(0.2)
     print(f"registration {secs:.2f} s, longest GUI-thread gap {probe.max_gap * 1000:.0f} ms "
-          f"(limit {limit * 1000:.0f} ms at load {load:.1f} per core)")
-    assert probe.ticks >= 0.3 * secs / 0.02
+          f"(limit {limit * 1000:.0f} ms, control's stretch {control.stretch:.2f})")
+    assert probe.ticks >= 0.3 * secs / 0.02 / control.stretch
     assert probe.max_gap < limit, "\n\n".join(probe.traces)
 
 

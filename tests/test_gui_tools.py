@@ -360,50 +360,45 @@ def test_alias_removed_and_3d_view_without_auto_update(qtbot):
 
 def test_region_statistics_keep_the_gui_thread_responsive(registered_workspace, qtbot):
     """The region's statistics run on a worker (a 4K cube's take seconds). Tolerance as in
-    test_gui_session.test_registration_keeps_the_gui_thread_responsive: 0.2 s times the load per
-    core when above 1 (the GUI thread then waits for a CPU, not for our code)."""
-    import os
-
-    from stall_probe import StallProbe
+    test_gui_session.test_registration_keeps_the_gui_thread_responsive: 0.2 s widened by the stretch a
+    control process saw over the same interval (stall_probe.LoadControl)."""
+    from stall_probe import LoadControl, StallProbe
 
     ws = registered_workspace
     s = ws.session
-    load = os.getloadavg()[0] / (os.cpu_count() or 1)
-    limit = 0.2 * max(1.0, load)
     x0, y0, x1, y1 = s.home
-    with StallProbe(trace_after_s=0.12) as probe:
+    with LoadControl() as control, StallProbe(trace_after_s=0.12) as probe:
         for src in ("hyperspectral", "thermal", "rgb"):
             ws.region_panel.source.setCurrentText(src)
             s.set_region("polygon", [(x0, y0), (x1, y0), (x1, y1), (x0, (y0 + y1) / 2)])
             qtbot.waitUntil(lambda src=src: s.region_stats is not None and s.region_stats.source == src
                             and not ws.is_busy(), timeout=20000)
         qtbot.wait(100)
-    print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms at load {load:.1f})")
+    limit = control.allowed(0.2)
+    print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms, control's stretch "
+          f"{control.stretch:.2f})")
     assert probe.max_gap < limit, "\n\n".join(probe.traces)
 
 
 def test_first_show_of_the_3d_tab_is_staged_and_complete(registered_workspace, qtbot):
     """The 3D tab's first show (GL widget, scene, first frames with software OpenGL) is built over
     several event-loop turns and ends with the whole scene: every point, both meshes, the axes.
-    Tolerance as in test_region_statistics_keep_the_gui_thread_responsive: 0.2 s times the load
-    per core when above 1. (Before: one 265-374 ms gap on the idle machine.)"""
-    import os
-
-    from stall_probe import StallProbe
+    Tolerance as in test_region_statistics_keep_the_gui_thread_responsive: 0.2 s widened by the
+    control's stretch. (Before: one 265-374 ms gap on the idle machine.)"""
+    from stall_probe import LoadControl, StallProbe
 
     ws = registered_workspace
     s = ws.session
     cv = ws.cloud_view
     assert cv.plotter is None  # created on first show
-    load = os.getloadavg()[0] / (os.cpu_count() or 1)
-    limit = 0.2 * max(1.0, load)
-    with StallProbe(trace_after_s=0.15) as probe:
+    with LoadControl() as control, StallProbe(trace_after_s=0.15) as probe:
         ws.set_view("3d")
         qtbot.waitUntil(lambda: cv.plotter is not None and not cv.building, timeout=30000)
         qtbot.wait(200)  # the last stage's repaint
+    limit = control.allowed(0.2)
     steps = [name for name, _ in cv._stages.timings]
-    print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms at load {load:.1f}); "
-          f"stages {cv._stages.timings}")
+    print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms, control's stretch "
+          f"{control.stretch:.2f}); stages {cv._stages.timings}")
     assert probe.max_gap < limit, "\n\n".join(probe.traces)
     n = len(s.cloud.points)
     assert n > cv.PREVIEW_POINTS  # so the first frame was a preview
@@ -436,14 +431,13 @@ def test_first_show_of_the_3d_tab_is_staged_and_complete(registered_workspace, q
 def test_wizard_frusta_view_is_drawn_in_stages(qapp, qtbot, no_qt_leaks):
     """Page 5's 3D view (frusta of the demo rig, 20 board poses): drawn over several event-loop
     turns, complete at the end (a frustum per camera, one boards actor, legend, axes). Tolerance as
-    in the test above. (Before: 361 ms on the idle machine, 567 ms at a load of 4.6.)"""
-    import os
-
+    in the test above. (Before: 361 ms on the idle machine, 567 ms at a load of 4.6; the limit was
+    then scaled by the load average, which failed on a busy machine: issue 22.)"""
     from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
 
     from plantreg_gui.core.synthetic.demo import demo_rig
     from plantreg_gui.gui.calibration.frusta_view import FrustaView
-    from stall_probe import StallProbe
+    from stall_probe import LoadControl, StallProbe
 
     rig = demo_rig()
     rng = np.random.default_rng(1)
@@ -461,13 +455,13 @@ def test_wizard_frusta_view_is_drawn_in_stages(qapp, qtbot, no_qt_leaks):
     try:
         view.set_scene(list(rig.cameras), boards)
         assert view.plotter is None  # drawn when shown
-        load = os.getloadavg()[0] / (os.cpu_count() or 1)
-        limit = 0.2 * max(1.0, load)
-        with StallProbe(trace_after_s=0.15) as probe:
+        with LoadControl() as control, StallProbe(trace_after_s=0.15) as probe:
             view.show()
             qtbot.waitUntil(lambda: view.n_frusta == len(rig.cameras) and not view.building, timeout=30000)
             qtbot.wait(200)
-        print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms at load {load:.1f})")
+        limit = control.allowed(0.2)
+        print(f"longest GUI-thread gap {probe.max_gap * 1000:.0f} ms (limit {limit * 1000:.0f} ms, control's "
+              f"stretch {control.stretch:.2f})")
         assert probe.max_gap < limit, "\n\n".join(probe.traces)
         assert view.error is None and view.n_boards == 20
         assert len(view.plotter.renderer.actors) >= 1 + len(rig.cameras)  # boards, frusta (+ legend)

@@ -8,12 +8,11 @@ calibration, error tables and the pages' redraws in one go.
 Tolerance. The goal is no gap over 200 ms on an idle 2-core machine
 (``benchmarks/bench_wizard_stalls.py`` measures it). Tests run on machines shared with other
 work, where a process that wants the CPU waits for it (at a load of 20 on 2 cores, 50 ms of
-painting takes half a second). So a *control process* (same priority, no Qt, no GIL shared with
-us) alternates 20 ms of CPU work and 20 ms of sleep over the same interval, like an event loop,
-and records how much longer than 40 ms its worst cycle took; the test allows
-``max(1.0 s, 0.5 s + 3 x control)`` (3: some of the GUI's slots run longer than 20 ms). On an
-idle machine that is 1 s: the freezes this guards against (seconds of work on the GUI thread or
-of a worker holding the GIL) fail it; at a load of 20 the test is correspondingly weaker.
+painting takes half a second). So a control process (:class:`stall_probe.LoadControl`: same
+priority, no Qt, no GIL shared with us, 20 ms of CPU work and 20 ms of sleep like an event loop)
+runs over the same interval; the test allows 1 s widened by the stretch it saw. On an idle machine
+that is about 1 s: the freezes this guards against (seconds of work on the GUI thread or of a
+worker holding the GIL) fail it; on a busy machine the test is correspondingly weaker.
 """
 
 from __future__ import annotations
@@ -26,40 +25,9 @@ import pytest
 pytestmark = pytest.mark.gui
 
 
-CONTROL = """
-import os, sys, time
-flag, worst = sys.argv[1], 0.0
-while not os.path.exists(flag):
-    t0 = time.perf_counter()
-    c0 = time.process_time()
-    while time.process_time() - c0 < 0.02:  # 20 ms of CPU work, like an event-loop slot ...
-        pass
-    time.sleep(0.02)  # ... then idle
-    worst = max(worst, time.perf_counter() - t0 - 0.04)
-print(worst)
-"""
-
-
-class _Control:
-    """The control process: the machine's own scheduling gaps over the measured interval."""
-
-    def __init__(self, tmp_path) -> None:
-        import subprocess
-        import sys
-
-        self.flag = tmp_path / "control.stop"
-        self.proc = subprocess.Popen([sys.executable, "-c", CONTROL, str(self.flag)], stdout=subprocess.PIPE,
-                                     text=True)
-
-    def stop(self) -> float:
-        self.flag.write_text("stop")
-        out, _ = self.proc.communicate(timeout=60)
-        return float(out.strip())
-
-
 def test_resuming_a_session_on_page_7_never_freezes_the_gui(qtbot, shared_data, tmp_path):
     from plantreg_gui.gui.calibration.wizard import CalibrationWizard
-    from stall_probe import StallProbe
+    from stall_probe import LoadControl, StallProbe
 
     folder = tmp_path / "stereo"
     shutil.copytree(shared_data / "opencv-stereo", folder)
@@ -73,9 +41,7 @@ def test_resuming_a_session_on_page_7_never_freezes_the_gui(qtbot, shared_data, 
     w.show()
     qtbot.waitExposed(w)
     try:
-        control = _Control(tmp_path)
-        qtbot.wait(300)  # the control process is running
-        with StallProbe() as probe:
+        with LoadControl() as control, StallProbe() as probe:
             assert w.open_session(folder)
             assert w.page == 7 and w.is_busy()
             qtbot.waitUntil(lambda: not w.is_busy(), timeout=600_000)
@@ -88,13 +54,12 @@ def test_resuming_a_session_on_page_7_never_freezes_the_gui(qtbot, shared_data, 
                     qtbot.waitUntil(lambda: view.n_frusta > 0 and not view.building or view.error is not None,
                                     timeout=30000)
                 qtbot.wait(100)
-        base = control.stop()
-        allowed = max(1.0, 0.5 + 3 * base)
+        allowed = control.allowed(1.0)
         assert w.model.calibration_ready() and w.model.report_ready(), w.last_error
         assert probe.ticks > 20
         assert probe.max_gap < allowed, (
-            f"GUI thread stalled {probe.max_gap * 1000:.0f} ms (allowed {allowed * 1000:.0f} ms, control "
-            f"{base * 1000:.0f} ms); gaps over 200 ms: {[round(g * 1000) for g in probe.stalls(0.2)]}")
+            f"GUI thread stalled {probe.max_gap * 1000:.0f} ms (allowed {allowed * 1000:.0f} ms, control's "
+            f"stretch {control.stretch:.2f}); gaps over 200 ms: {[round(g * 1000) for g in probe.stalls(0.2)]}")
     finally:
         w.shutdown()
         w.close()

@@ -170,3 +170,28 @@ def test_undo_keeps_fields_it_does_not_know(world):
     assert len(s.points) == 1 and s.points[0].note == "tip"
     assert s.points[0].extra == {"uncertainty_px": 2.5, "by": "annotator A"}
     assert s.points[0].to_dict()["uncertainty_px"] == 2.5
+
+
+def test_rigs_saved_by_the_page_keep_the_mixed_pixel_widening(world, tmp_path):
+    """Issue 23: a rig fitted on the landmark page, and one nudged after the fit, carry the typed
+    calibration record and the mixed-pixel flag's registration uncertainty (0 before: the page's
+    method did not read exactly "landmarks")."""
+    from plantreg_gui.core.camera.record import CalibrationRecord
+    from plantreg_gui.core.camera.rig import Rig
+    from plantreg_gui.core.registration.mixed import calibration_residual_px
+
+    s = session_for(world)
+    s.set_camera(CAM)
+    click_pairs(s, world, n=8)
+    s.fit()
+    fitted = Rig.load(s.save_rig(tmp_path / "fit.json"))
+    rec = CalibrationRecord.of(fitted.extra)
+    assert rec.source == "plantreg-gui landmark page" and rec.residual_kind == "landmarks"
+    assert rec.per_camera[CAM]["median_px"] > 0
+    assert calibration_residual_px(fitted.extra, CAM) == pytest.approx(rec.per_camera[CAM]["median_px"])
+    s.nudge("translate", 0, 0.002)
+    nudged = Rig.load(s.save_rig(tmp_path / "nudged.json"))
+    rec = CalibrationRecord.of(nudged.extra)
+    assert rec.method == "manual nudge" and "before_nudge" in rec.details
+    # the nudged rig's own residuals (2 mm moved: larger than the fit's)
+    assert calibration_residual_px(nudged.extra, CAM) > calibration_residual_px(fitted.extra, CAM) > 0

@@ -1,4 +1,4 @@
-"""core.procs.call_in_process: result, progress, errors and cancellation cross the process boundary."""
+"""core.jobs.process_job.call_in_process: result, progress, errors and cancellation cross the process boundary."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import time
 import pytest
 
 from plantreg_gui.core.errors import Cancelled, InputError, PlantregError
-from plantreg_gui.core.jobs.procs import call_in_process
+from plantreg_gui.core.jobs.process_job import call_in_process
 from plantreg_gui.core.progress import CancelToken, Reporter
 
 

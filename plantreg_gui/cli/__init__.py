@@ -17,8 +17,10 @@ from .. import __version__, prefer_one_blas_thread
 
 prefer_one_blas_thread()  # before numpy is first imported (the subcommands import it)
 from ..core.errors import Cancelled, PlantregError
+from ..core import signals
+from ..core.signals import Terminated  # noqa: F401 - raised by a terminating signal (docs/errors.md)
 
-SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "recording", "batch")  # modules NAME_cmd
+SUBCOMMANDS = ("demo", "register", "calibrate", "fit_rig", "rig", "recording", "batch")  # modules NAME_cmd
 
 
 class StderrProgress:
@@ -76,33 +78,6 @@ def nonneg_int(text: str) -> int:
     return v
 
 
-class Terminated(BaseException):
-    """SIGTERM or SIGHUP arrived: unwinds like Ctrl-C, so every temporary output is removed."""
-
-    def __init__(self, signum: int):
-        super().__init__(signum)
-        self.signum = signum
-
-
-def _raise_terminated(signum, frame) -> None:
-    raise Terminated(signum)
-
-
-def _install_signal_handlers() -> dict:
-    """SIGTERM (``timeout``, ``kill``, a batch system) and SIGHUP (a closed terminal) clean up
-    like SIGINT. Only from the main thread (signal handlers cannot be set elsewhere)."""
-    import threading
-
-    old = {}
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGTERM, signal.SIGHUP):
-            try:
-                old[sig] = signal.signal(sig, _raise_terminated)
-            except (OSError, ValueError):  # pragma: no cover - platform without the signal
-                pass
-    return old
-
-
 def _silence_stdio() -> None:
     """Point stdout/stderr at /dev/null: after a reader closed the pipe, the interpreter's own
     flush at exit would otherwise report the broken pipe once more."""
@@ -141,7 +116,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     # the words of this command line, for provenance (sys.argv is someone else's when called in-process)
     args.argv = list(sys.argv[1:] if argv is None else argv)
-    old_handlers = _install_signal_handlers()
+    # SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGALRM, SIGXCPU ... unwind like Ctrl-C (core/signals.py)
+    old_handlers = signals.install()
     try:
         return int(args.run(args) or 0)
     except Terminated as e:
@@ -176,8 +152,7 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         raise
     finally:
-        for sig, h in old_handlers.items():
-            signal.signal(sig, h)
+        signals.uninstall(old_handlers)
 
 
 def entry() -> None:

@@ -6,9 +6,12 @@
 
 A RECORDING is a recording folder, or a text/CSV file listing one per line. Each goes to
 ``OUT/<recording folder name>/`` in ``plantreg register``'s layout; ``OUT/batch.csv`` has one
-row per recording (status done / skipped / failed, the error, case shares, timings, files).
-A re-run skips recordings whose output is complete and made from the same inputs and
-parameters. Exit code 1 if any recording failed. Engine: :mod:`plantreg_gui.core.pipeline.batch`.
+row per recording (status done / skipped / failed, the error, case shares, timings, files); a
+later run into the same OUT adds its rows to it (a recording run again gets its new row). One
+batch at a time per OUT (a lock file, ``OUT/.plantreg-batch.lock``, while it runs); a
+``--scheduler`` is asked who it is before OUT is created. A re-run skips recordings whose
+output is complete and made from the same inputs and parameters. Exit code 1 if any recording failed. Engine: :mod:`plantreg_gui.core.pipeline.batch`
+(and :mod:`~plantreg_gui.core.pipeline.batch_guard`).
 """
 
 from __future__ import annotations
@@ -41,7 +44,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="local worker processes (default: the number of cores)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run on a Dask distributed cluster (e.g. tcp://host:8786) instead of local processes; "
-                   "the workers must see the same file system")
+                   "the workers must see the same file system. The scheduler must answer Dask's handshake within "
+                   "10 s, checked before OUT is created")
     add_registration_options(p)
     add_output_options(p)
     p.add_argument("--overwrite", action="store_true",
@@ -84,7 +88,7 @@ class _Progress:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..core.pipeline import batch
+    from ..core.pipeline import batch, batch_guard
     from ..core.export.export import check_output_spares_inputs
     from .register_cmd import load_rig_for_target, output_options, registration_params
 
@@ -99,7 +103,26 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("output path exists and is not a folder", out)
     jobs = batch.plan(batch.expand_inputs(args.recordings), out)  # name clashes: refused before any work
     check_output_spares_inputs(out, [rig_path] + [Path(j.recording) for j in jobs])
+    if args.scheduler:  # before OUT exists: a wrong address leaves nothing behind
+        batch_guard.check_scheduler(args.scheduler)
+    made = not os.path.lexists(out)
     out.mkdir(parents=True, exist_ok=True)
+    try:
+        with batch_guard.OutputLock(out):  # a second batch into OUT is refused while this one runs
+            return _run_locked(args, jobs, out, rig_path, options, params)
+    finally:
+        if made:  # nothing was written (refused, or stopped before the first row): no empty OUT
+            try:
+                out.rmdir()
+            except OSError:
+                pass
+
+
+def _run_locked(args, jobs, out: Path, rig_path: Path, options, params) -> int:
+    from ..core.pipeline import batch, batch_guard
+
+    csv_path = out / batch_guard.BATCH_CSV
+    earlier = batch_guard.read_csv(csv_path)  # rows of earlier runs into OUT: kept, ours merged in
     settings = batch.BatchSettings(rig=str(rig_path), target=args.target, out=str(out), params=params.to_dict(),
                                    outputs=options.parts, overwrite=bool(args.overwrite),
                                    tiff_codec=options.tiff_codec, drop_mixed=options.drop_mixed)
@@ -112,7 +135,10 @@ def run(args: argparse.Namespace) -> int:
     order = {j.name: i for i, j in enumerate(jobs)}
     rows: dict[str, dict] = {}
     progress = _Progress(len(jobs), args.quiet)
-    csv_path = out / batch.BATCH_CSV
+
+    def table() -> list[dict]:
+        return batch_guard.merge_rows(earlier, sorted(rows.values(), key=lambda r: order[r["name"]]))
+
     t0 = time.monotonic()
     last_csv = 0.0
     try:
@@ -120,16 +146,17 @@ def run(args: argparse.Namespace) -> int:
             rows[row["name"]] = row
             progress.update(row)
             if time.monotonic() - last_csv > 2.0:  # a crash of this process still leaves a table behind
-                batch.write_csv(csv_path, sorted(rows.values(), key=lambda r: order[r["name"]]))
+                batch_guard.write_csv(csv_path, table())
                 last_csv = time.monotonic()
     finally:
         progress.close()
         if rows:
-            batch.write_csv(csv_path, sorted(rows.values(), key=lambda r: order[r["name"]]))
+            batch_guard.write_csv(csv_path, table())
     wall = time.monotonic() - t0
     counts = {s: sum(1 for r in rows.values() if r["status"] == s) for s in ("done", "skipped", "failed")}
+    kept = len({r["name"] for r in earlier} - set(rows))
     print(f"{len(jobs)} recording(s): {counts['done']} done, {counts['skipped']} skipped, {counts['failed']} failed "
-          f"in {wall:.1f} s; wrote {csv_path}")
+          f"in {wall:.1f} s; wrote {csv_path}" + (f" (with {kept} row(s) of earlier runs)" if kept else ""))
     for r in sorted(rows.values(), key=lambda r: order[r["name"]]):
         if r["status"] == "failed":
             print(f"  failed {r['recording']}: {r['error']}")

@@ -1,18 +1,19 @@
 """``plantreg fit-rig``: fit a rig's cameras to landmarks clicked in the recordings themselves.
 
     plantreg fit-rig --rig START --landmarks LANDMARKS.json --out RIG
-                     [--free focal,principal,k1] [--refine] [--silhouette] [--recording DIR ...] [--overwrite] [--quiet]
+                     [--free focal,principal,k1] [--fit CAM,...] [--prior KEY=VAL,...] [--no-snap-depth]
+                     [--max-median PX] [--refine] [--silhouette] [--recording DIR ...] [--overwrite] [--quiet]
 
-Writes a normal rig file whose ``"calibration"`` entry records the method, the landmarks used,
-every residual and the leave-one-recording-out residuals, and prints the per-camera residual
-table with the worst landmarks (see docs/fit-rig.md).
+Writes a normal rig file whose ``"calibration"`` entry is the typed calibration record
+(``core/camera/record.py``: method, the landmarks used, every residual, leave-one-out residuals),
+and prints the per-camera residual table with the start notes and the worst landmarks (see
+docs/fit-rig.md). A fit the landmarks do not support writes nothing and exits 1.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from datetime import datetime, timezone
 from pathlib import Path
 
 from ..core.errors import InputError
@@ -34,6 +35,19 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--free", default="", metavar="ITEMS",
                    help="intrinsics to fit: comma-separated focal, principal, k1 (every camera, the depth camera "
                         "included) or CAMERA:ITEM for one camera, e.g. 'focal,ir:k1,ir:principal'")
+    p.add_argument("--fit", default=None, metavar="CAM,...",
+                   help="fit only these cameras (each must have enough landmarks); default: every camera with "
+                        "enough landmarks, the others kept at their start pose with a warning")
+    p.add_argument("--prior", default="", metavar="KEY=VAL,...",
+                   help="prior sigmas around the start rig: rotation (deg, 5), position (m, 0.05), focal "
+                        "(relative, 0.05), principal (of the width, 0.03), k1 (0.2), click (px, 1), robust (px, 3); "
+                        "e.g. 'focal=0.2' for a focal length from a data sheet")
+    p.add_argument("--max-median", type=float, default=10.0, metavar="PX",
+                   help="refuse (write nothing, exit 1) when a camera's median landmark residual exceeds PX "
+                        "(default 10)")
+    p.add_argument("--no-snap-depth", action="store_true",
+                   help="leave out a landmark whose depth lies well behind the surface beside it (the ground "
+                        "through a notch, just past a leaf's edge) instead of putting it on that surface (default)")
     p.add_argument("--refine", action="store_true",
                    help="then refine the rig automatically from the images (see docs/fit-rig.md)")
     p.add_argument("--silhouette", action="store_true",
@@ -48,24 +62,39 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def run(args: argparse.Namespace) -> int:
-    from .. import cli
-    from ..core.data.landmarks import LandmarkSet
-    from ..core.camera.rig import Rig
-    from ..core.rigfit.rigfit import fit_rig_from_file, format_report, parse_free
-
-    out: Path = args.out
-    if out.exists() and not args.overwrite:
+def check_output_rig(out: Path, overwrite: bool, inputs: dict[str, Path] | None = None) -> None:
+    """Refuse an output rig path before any work (``fit-rig``, ``rig create``): an existing file
+    without ``overwrite``, one of the command's ``inputs`` (what -> path), a folder, a missing
+    folder. The rig is then written atomically by :meth:`Rig.save`."""
+    if out.exists() and not overwrite:
         raise InputError("output rig file exists (choose another, or pass --overwrite)", out)
-    if out.exists() and out.resolve() == Path(args.landmarks).resolve():
-        raise InputError("--out is the landmarks file; write the rig elsewhere", out)
+    for what, p in (inputs or {}).items():
+        if out.exists() and p.exists() and out.resolve() == p.resolve():
+            raise InputError(f"--out is {what}; write the rig elsewhere", out)
     if out.is_dir():
         raise InputError("output path is a folder, not a file", out)
     if not out.absolute().parent.is_dir():
         raise InputError("the folder for the output rig does not exist", out.absolute().parent)
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import cli
+    from ..core.data.landmarks import LandmarkSet
+    from ..core.camera.rig import Rig
+    from ..core.camera.record import landmark_record
+    from ..core.rigfit.rigfit import fit_rig_from_file, format_report, keep_not_worse, parse_free, parse_priors
+
+    out: Path = args.out
+    check_output_rig(out, args.overwrite, {"the landmarks file": Path(args.landmarks)})
     if args.recording and not (args.refine or args.silhouette):
         raise InputError("--recording adds recordings for --refine or --silhouette; pass one of them too")
     free = parse_free(args.free)
+    priors = parse_priors(args.prior)
+    if not (args.max_median > 0):
+        raise InputError(f"--max-median must be a positive number of pixels, got {args.max_median:g}")
+    fit_cams = [c.strip() for c in args.fit.split(",") if c.strip()] if args.fit is not None else None
+    if fit_cams is not None and not fit_cams:
+        raise InputError("--fit names no camera")
     rig = Rig.load(args.rig)
     try:
         rig.depth()
@@ -73,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"{e.detail}; a landmark fit needs the depth camera", args.rig) from None
     landmarks = LandmarkSet.load(args.landmarks)
     if landmarks.count() > 0:
-        result = fit_rig_from_file(rig, landmarks, free=free)
+        result = fit_rig_from_file(rig, landmarks, free=free, priors=priors, cameras=fit_cams,
+                                   max_median_px=args.max_median, snap_depth=not args.no_snap_depth)
         fitted, report, warnings = result.rig, result.report, list(result.warnings)
         method = "landmarks"
     elif args.refine or args.silhouette:  # no points: refine from the images alone, starting from the start rig
@@ -91,23 +121,24 @@ def run(args: argparse.Namespace) -> int:
 
         rr = refine_rig(fitted, recordings, free=free, landmarks=by_folder,
                         progress=Reporter(cli.StderrProgress(quiet=args.quiet)))
-        fitted, method = rr.rig, ("landmarks+refine" if report.get("landmarks_used") else "refine")
+        refined, w = keep_not_worse(fitted, rr.rig, rr.report.get("cameras", {}), "refinement")
+        fitted, method = refined, ("landmarks+refine" if report.get("landmarks_used") else "refine")
         report["refine"] = rr.report
-        warnings += list(rr.warnings)
+        warnings += list(rr.warnings) + w
     if args.silhouette:
+        before = fitted
         fitted, method = _silhouette(args, fitted, recordings, by_folder, report, method)
+        fitted, w = keep_not_worse(before, fitted, report["silhouette"].get("cameras", {}), "silhouette fit")
+        warnings += w
     previous = rig.extra.get("calibration")
-    fitted.extra["calibration"] = {
-        "method": method,
-        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "command": "plantreg " + " ".join(getattr(args, "argv", []) or sys.argv[1:]),
-        "start_rig": str(Path(args.rig).resolve()),
-        "landmarks_file": str(Path(args.landmarks).resolve()),
-        **{k: v for k, v in report.items() if k not in ("time_s", "method")},
-        "warnings": warnings,
+    landmark_record(
+        method, "plantreg fit-rig", report,
+        command="plantreg " + " ".join(getattr(args, "argv", []) or sys.argv[1:]),
+        start_rig=str(Path(args.rig).resolve()), landmarks_file=str(Path(args.landmarks).resolve()),
+        warnings=warnings,
         **({"previous_method": previous.get("method")} if isinstance(previous, dict) and previous.get("method")
            else {}),
-    }
+    ).store(fitted)
     fitted.save(out)
     if report.get("landmarks_used"):
         print(format_report(report, worst=args.worst))
@@ -156,5 +187,6 @@ def _silhouette_table(rep: dict) -> str:
         b = [e for v in r["views"].values() for e in v.get("landmarks_px", [])]
         a = [e for v in r["views"].values() for e in v.get("landmarks_px_after", [])]
         lm = f"{np.median(b):.2f} -> {np.median(a):.2f} (n {len(a)})" if a else "-"
-        lines.append(f"  {name:<15} {len(r['views']):>10}  {np.median(med) if med else float('nan'):>17.2f}  {lm}")
+        lines.append(f"  {name:<15} {len(r['views']):>10}  {np.median(med) if med else float('nan'):>17.2f}  {lm}"
+                     + ("  REVERTED (worse)" if r.get("reverted") else ""))
     return "\n".join(lines)

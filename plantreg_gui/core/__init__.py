@@ -12,8 +12,8 @@ enforced by the import-linter contracts in ``pyproject.toml``):
 * :mod:`.geometry` -- depth maps, ToF clean-up, meshes, ray casting, the region of interest.
 * :mod:`.camera` -- cameras (the one projection), rigs, the registry of modalities.
 * :mod:`.io`, :mod:`.jobs` -- reading and atomically writing files; work in child processes.
-* :mod:`.progress`, :mod:`.validate`, :mod:`.errors` -- progress and cancellation, checks of
-  untrusted numbers, the error types every part raises.
+* :mod:`.progress`, :mod:`.validate`, :mod:`.signals`, :mod:`.errors` -- progress and cancellation,
+  checks of untrusted numbers, terminating signals, the error types every part raises.
 
 Never imports Qt or any GUI toolkit (enforced by tests/test_architecture.py).
 """

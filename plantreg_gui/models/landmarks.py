@@ -449,7 +449,7 @@ class LandmarkSession:
         """A routine ``(progress=Reporter) -> RefineResult`` (core/rigfit/refine.py) on copies, over
         every recording of the session, checked against the landmarks.
 
-        ``in_process``: run the refinement in a child process (:func:`~.procs.call_in_process`;
+        ``in_process``: run the refinement in a child process (:func:`~.process_job.call_in_process`;
         the routine must be picklable). For the desktop app: on threads, the refinement's camera
         threads hold the GIL for stretches (GUI-thread gaps while it runs) and notice a cancel only
         at their next cancellation point (seconds apart on the real plants); a child is stopped at once."""
@@ -467,7 +467,7 @@ class LandmarkSession:
 
         def job(progress: Reporter | None = None) -> Any:
             if in_process:
-                from ..core.jobs.procs import call_in_process
+                from ..core.jobs.process_job import call_in_process
 
                 return call_in_process(fn, rig, recs, cameras=cameras, free=free, landmarks=lms,
                                        progress=progress, **kw)
@@ -519,7 +519,7 @@ class LandmarkSession:
 
     def save_rig(self, path: str | Path) -> Path:
         """Write the current rig, with the last fit/refine report as its ``"calibration"`` provenance."""
-        from datetime import datetime, timezone
+        from ..core.camera.record import landmark_record
 
         rig = Rig.from_dict(self.rig.to_dict())
         if self.report is not None and not self.report_is_current or \
@@ -527,23 +527,19 @@ class LandmarkSession:
             # moved by hand since the last fit (or since opened): the old provenance and its
             # residuals would describe another rig -- say what this one is, keep the old as history
             before = self.report if self.report is not None else rig.extra.get("calibration")
-            rig.extra["calibration"] = {
-                "method": "manual nudge (plantreg-gui landmark page)",
-                "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                "landmarks_file": str(self.landmarks.path.resolve()) if self.landmarks.path else None,
-                "per_camera": self.summary(),
-                "note": "camera poses moved by hand after the fit below; per_camera are this rig's residuals",
-                "before_nudge": {k: v for k, v in (before or {}).items() if k != "time_s"},
-                "warnings": self.warnings if self.report is not None else [],
-            }
+            landmark_record(
+                "manual nudge", "plantreg-gui landmark page", {"per_camera": self.summary()},
+                landmarks_file=str(self.landmarks.path.resolve()) if self.landmarks.path else None,
+                note="camera poses moved by hand after the fit below; per_camera are this rig's residuals",
+                before_nudge={k: v for k, v in (before or {}).items() if k != "time_s"},
+                warnings=self.warnings if self.report is not None else [],
+            ).store(rig)
         elif self.report is not None:
-            rig.extra["calibration"] = {
-                "method": self.report.get("method", "landmarks") + " (plantreg-gui landmark page)",
-                "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                "landmarks_file": str(self.landmarks.path.resolve()) if self.landmarks.path else None,
-                **{k: v for k, v in self.report.items() if k not in ("method", "time_s")},
-                "warnings": self.warnings,
-            }
+            landmark_record(
+                self.report.get("method", "landmarks"), "plantreg-gui landmark page", self.report,
+                landmarks_file=str(self.landmarks.path.resolve()) if self.landmarks.path else None,
+                warnings=self.warnings,
+            ).store(rig)
         rig.save(path)
         self._saved_cameras = self._cameras_dicts()
         return Path(path)

@@ -126,7 +126,7 @@ DEMO_IN_PROCESS = True
 
 def demo_job(folder: Path, settings, progress) -> dict:
     from ..core import synthetic
-    from ..core.jobs.procs import call_in_process
+    from ..core.jobs.process_job import call_in_process
 
     progress(0.0, "writing the demo rig and recording")
     # the calibration session is the wizard's business; leaving it out halves the start-up

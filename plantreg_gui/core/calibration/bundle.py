@@ -108,6 +108,15 @@ def project_jac(Z: np.ndarray, K: np.ndarray, dist: np.ndarray, jacobians: bool 
     return q, dq_dZ, Ji
 
 
+def _obs_sums(X: np.ndarray, Y: np.ndarray, starts: np.ndarray, same: int) -> np.ndarray:
+    """Per observation the sum over its corners of ``X_n^T Y_n``: ``X`` (n, 2, a), ``Y`` (n, 2, b)
+    with each observation's corners consecutive from ``starts`` -> (n_obs, a, b). ``same``: the
+    corners of every observation when all have as many (one batched product), else 0."""
+    if same:
+        return np.matmul(X.reshape(-1, 2 * same, X.shape[2]).transpose(0, 2, 1), Y.reshape(-1, 2 * same, Y.shape[2]))
+    return np.add.reduceat(np.matmul(X.transpose(0, 2, 1), Y), starts, axis=0)
+
+
 def _exp(w: np.ndarray) -> np.ndarray:
     return cv2.Rodrigues(np.asarray(w, float).reshape(3, 1))[0]
 
@@ -196,6 +205,7 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
 
     # every corner of every observation, grouped by camera, then by observation
     per_cam = {}
+    same_len: dict[str, int] = {}  # camera -> the corners of each of its views, when all have as many
     for c in cams:
         mine = [(k, ob) for k, ob in enumerate(obs) if ob[1] == c]
         if not mine:
@@ -207,6 +217,7 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
         starts = np.r_[0, np.cumsum(lens)[:-1]]
         bidx = np.array([pidx[ob[0]] for _k, ob in mine])
         per_cam[c] = (obj, img, starts, bidx, np.repeat(bidx, lens), [k for k, _ob in mine])
+        same_len[c] = int(lens[0]) if np.all(lens == lens[0]) else 0
     n_pts = sum(len(v[0]) for v in per_cam.values() if v is not None)
 
     def evaluate(intr, Rc, tc, Rb, tb, want_normal: bool, fs: float):
@@ -220,6 +231,7 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
             if per_cam[c] is None:
                 continue
             obj, img, starts, bidx, pb, _ks = per_cam[c]
+            same = same_len[c]
             Xb = np.einsum("nij,nj->ni", Rb[pb], obj)
             Y = Xb + tb[pb]
             RY = Y @ Rc[c].T
@@ -245,9 +257,9 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
             Jc2, Jcw2 = Jc.reshape(-1, pc), Jcw.reshape(-1, pc)
             A[sl, sl] += Jcw2.T @ Jc2
             ga[sl] += Jcw2.T @ r.ravel()
-            cb = np.add.reduceat(np.einsum("nki,nkj->nij", Jcw, Jb), starts, axis=0)  # (n_obs, pc, 6)
-            cc = np.add.reduceat(np.einsum("nki,nkj->nij", Jbw, Jb), starts, axis=0)
-            gg = np.add.reduceat(np.einsum("nki,nk->ni", Jbw, r), starts, axis=0)
+            cb = _obs_sums(Jcw, Jb, starts, same)  # (n_obs, pc, 6)
+            cc = _obs_sums(Jbw, Jb, starts, same)
+            gg = _obs_sums(Jbw, r[:, :, None], starts, same)[:, :, 0]
             for m, b in enumerate(bidx):
                 B[sl, 6 * b : 6 * b + 6] += cb[m]
             np.add.at(C, bidx, cc)
@@ -302,12 +314,13 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
         Cd[:, idx, idx] += lam * np.maximum(C[:, idx, idx], 1e-12) + 1e-12
         Cinv = np.linalg.inv(Cd)
         B3 = Bf.reshape(nc, npose, 6).transpose(1, 0, 2)  # (P, nc, 6)
-        BC = np.einsum("pij,pjk->pik", B3, Cinv)          # (P, nc, 6)
-        S = Ad - np.einsum("pik,pjk->ij", BC, B3)
+        BC = np.matmul(B3, Cinv)                           # (P, nc, 6)
+        BC2 = BC.transpose(1, 0, 2).reshape(nc, 6 * npose)
+        S = Ad - BC2 @ Bf.T                                # Bf (nc, 6P) is B3 laid out as BC2
         g3 = gb.reshape(npose, 6)
-        rhs = gaf - np.einsum("pik,pk->i", BC, g3)
+        rhs = gaf - BC2 @ gb
         dc = np.linalg.solve(S, rhs)
-        db = np.einsum("pij,pj->pi", Cinv, g3 - np.einsum("pki,k->pi", B3, dc))
+        db = np.matmul(Cinv, (g3 - (dc @ Bf).reshape(npose, 6))[:, :, None])[:, :, 0]
         return -dc, -db
 
     def apply(dc, db):
@@ -331,10 +344,12 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
             lam *= 10.0
             continue
         cand = apply(dc, db)
-        if gauss_newton:
+        if gauss_newton:  # after the last step only the residuals are needed (unless the covariance is)
             intr, Rc, tc, Rb, tb = cand
-            res, A, B, C, ga, gb = evaluate(intr, Rc, tc, Rb, tb, True, fs)
-            add_prior(A, ga, intr)
+            last = it == max_iter and not covariance
+            res, A, B, C, ga, gb = evaluate(intr, Rc, tc, Rb, tb, not last, fs)
+            if not last:
+                add_prior(A, ga, intr)
             continue
         res_new = evaluate(*cand, False, fs)[0]
         f_new = total_cost(res_new, cand[0])
@@ -365,7 +380,7 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
         # covariance of the camera parameters: s^2 (A - B C^-1 B^T)^-1 over the free ones
         B3 = B.reshape(nc, npose, 6).transpose(1, 0, 2)
         Cinv = np.linalg.pinv(C)
-        S = (A - np.einsum("pij,pjk,plk->il", B3, Cinv, B3))[np.ix_(free, free)]
+        S = (A - np.matmul(B3, Cinv).transpose(1, 0, 2).reshape(nc, 6 * npose) @ B.T)[np.ix_(free, free)]
         # scale to unit diagonal before inverting: fx (1000s) and k3 (0.01s) differ by 1e6
         dsc = 1.0 / np.sqrt(np.maximum(np.diag(S), 1e-300))
         Sinv = dsc[:, None] * np.linalg.pinv(S * dsc[:, None] * dsc[None, :], rcond=1e-14, hermitian=True) * dsc[None, :]

@@ -312,11 +312,13 @@ def _consensus(cands: list[tuple[str, int, np.ndarray, np.ndarray]]):
     a symmetric board, one per ordering), the one most board poses agree with (rotation within
     ``INCONSISTENT_DEG``), and per board pose the flip closest to it."""
     best, best_key = None, None
-    for i, (_p, _f, Ri, ti) in enumerate(cands):
+    Rs = np.stack([c[2] for c in cands])
+    # angle between every two candidates at once: trace(Ri Rj^T) = sum of the elementwise product
+    ang = np.degrees(np.arccos(np.clip((np.einsum("iab,jab->ij", Rs, Rs) - 1.0) / 2.0, -1.0, 1.0)))
+    for i in range(len(cands)):
         angs: dict[str, float] = {}
-        for p, _f2, Rj, _tj in cands:
-            a = _angle_deg(Ri @ Rj.T)
-            angs[p] = min(angs.get(p, np.inf), a)
+        for j, (p, _f2, _Rj, _tj) in enumerate(cands):
+            angs[p] = min(angs.get(p, np.inf), float(ang[i, j]))
         support = sum(a < INCONSISTENT_DEG for a in angs.values())
         key = (-support, float(np.median(list(angs.values()))))
         if best_key is None or key < best_key:

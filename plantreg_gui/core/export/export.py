@@ -356,10 +356,13 @@ class EarlyTiffs:
         import threading
         from concurrent.futures import ThreadPoolExecutor
 
+        from .. import signals
+
         self.out.parent.mkdir(parents=True, exist_ok=True)
-        self._dir = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.", suffix=".part", dir=self.out.parent))
-        self._stop = threading.Event()
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="plantreg-early")
+        with signals.deferred():  # a signal here would leave the folder without __exit__ to remove it
+            self._dir = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.", suffix=".part", dir=self.out.parent))
+            self._stop = threading.Event()
+            self._pool = ThreadPoolExecutor(1, thread_name_prefix="plantreg-early")
         return self
 
     def __call__(self, cam: str, image: Any) -> None:

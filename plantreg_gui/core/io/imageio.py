@@ -20,7 +20,6 @@ from __future__ import annotations
 import errno
 import os
 import shutil
-import signal
 import stat
 import tempfile
 import warnings
@@ -32,6 +31,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, one_line
+from .. import signals
 
 #: Still formats OpenCV decodes besides PNG/JPEG/TIFF (thermal and machine-vision cameras write
 #: 16-bit PGM, 8-bit PPM, BMP): suffix -> (format name, accepted file signatures).
@@ -161,9 +161,29 @@ def _read_npy(path: Path) -> Callable[[], np.ndarray]:
     return lambda: np.load(path, allow_pickle=False)
 
 
-def _read_png_jpeg(path: Path, suffix: str) -> Callable[[], np.ndarray]:
+def _pillow_header(path: Path, kind: str, verify: bool = False) -> tuple[int, int, int, str, dict]:
+    """An image file's header read by Pillow without decoding the pixels (decompression bombs
+    are refused before any decoding): (width, height, bands, Pillow mode, info). ``verify``:
+    also check the file's structure (PNG chunk CRCs). A bad header raises :class:`InputError`
+    naming the file as a ``kind`` file."""
     from PIL import Image
 
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(path) as im:
+                out = (*im.size, len(im.getbands()), im.mode, dict(im.info))
+                if verify:
+                    im.verify()
+    except Image.DecompressionBombError as e:
+        raise InputError(f"{kind} header claims an image beyond plantreg's sanity bound ({one_line(str(e))})",
+                         path) from None
+    except (OSError, SyntaxError, ValueError) as e:
+        raise InputError(f"corrupt or truncated {kind} file ({one_line(str(e))})", path) from None
+    return out
+
+
+def _read_png_jpeg(path: Path, suffix: str) -> Callable[[], np.ndarray]:
     with open(path, "rb") as f:
         head = f.read(33)  # signature, then a PNG's IHDR chunk
         f.seek(0, os.SEEK_END)
@@ -175,22 +195,9 @@ def _read_png_jpeg(path: Path, suffix: str) -> Callable[[], np.ndarray]:
         raise InputError(f"not a {'PNG' if suffix == '.png' else 'JPEG'} file (its first bytes are not the "
                          "format's signature)", path)
     kind = "PNG" if is_png else "JPEG"
-    # header only (Pillow reads it without decoding): refuse decompression bombs before decoding
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            with Image.open(path) as im:
-                w, h = im.size
-                bands = len(im.getbands())
-                bits = 16 if im.mode.startswith("I") else 8
-                plain = is_png and "transparency" not in im.info
-                if is_png:
-                    im.verify()  # chunk CRCs and structure, without decoding the pixels
-    except Image.DecompressionBombError as e:
-        raise InputError(f"{kind} header claims an image beyond plantreg's sanity bound ({one_line(str(e))})",
-                         path) from None
-    except (OSError, SyntaxError, ValueError) as e:
-        raise InputError(f"corrupt or truncated {kind} file ({one_line(str(e))})", path) from None
+    w, h, bands, mode, info = _pillow_header(path, kind, verify=is_png)  # PNG: chunk CRCs and structure too
+    bits = 16 if mode.startswith("I") else 8
+    plain = is_png and "transparency" not in info
     _check_array_header(path, (h, w, bands), np.uint16 if bits == 16 else np.uint8, f"the {kind} header")
     # libjpeg decodes a truncated file with grey fill and only a warning: the end marker tells
     if is_jpeg and b"\xff\xd9" not in tail:
@@ -232,26 +239,14 @@ def _opencv_decode(path: Path, kind: str) -> np.ndarray:
 def _read_opencv_still(path: Path, suffix: str) -> Callable[[], np.ndarray]:
     """PGM/PPM/PBM/PNM/PFM (8- and 16-bit, float), BMP, WebP, JPEG 2000, Sun raster: the signature
     and the header (Pillow, without decoding) are checked first, then OpenCV decodes the pixels."""
-    from PIL import Image
-
     kind, signatures = OPENCV_STILLS[suffix]
     with open(path, "rb") as f:
         head = f.read(16)
     if not any(head.startswith(sig.encode("latin-1")) for sig in signatures) or (
             kind == "WebP" and head[8:12] != b"WEBP"):
         raise InputError(f"not a {kind} file (its first bytes are not the format's signature)", path)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            with Image.open(path) as im:
-                w, h = im.size
-                bands = len(im.getbands())
-                dtype = {"I": np.uint16, "I;16": np.uint16, "I;16B": np.uint16, "F": np.float32}.get(im.mode, np.uint8)
-    except Image.DecompressionBombError as e:
-        raise InputError(f"{kind} header claims an image beyond plantreg's sanity bound ({one_line(str(e))})",
-                         path) from None
-    except (OSError, SyntaxError, ValueError) as e:
-        raise InputError(f"corrupt or truncated {kind} file ({one_line(str(e))})", path) from None
+    w, h, bands, mode, _info = _pillow_header(path, kind)
+    dtype = {"I": np.uint16, "I;16": np.uint16, "I;16B": np.uint16, "F": np.float32}.get(mode, np.uint8)
     _check_array_header(path, (h, w, bands), dtype, f"the {kind} header")
     if head[:2] in (b"P4", b"P5", b"P6", b"Pf", b"PF"):  # binary netpbm: the pixel data must all be there
         per = {b"P4": 0, b"P5": 1, b"P6": 3, b"Pf": 1, b"PF": 3}[head[:2]]
@@ -506,23 +501,6 @@ def _renamed(e: OSError, tmp: Path, final: Path) -> OSError:
 
 
 @contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """Hold SIGINT/SIGTERM/SIGHUP while a few renames move a complete result into place, so
-    that a signal never lands between moving the old result aside and the new one in."""
-    sigs = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
-    import threading
-
-    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
-@contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success move it into place, on error remove it.
 
@@ -535,9 +513,10 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     tmp: Path | None = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp_s = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
-        os.close(fd)
-        tmp = Path(tmp_s)
+        with signals.deferred():  # a temporary is never created without its name being known here
+            fd, tmp_s = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
+            os.close(fd)
+            tmp = Path(tmp_s)
         yield tmp
         _publish(tmp)
         os.replace(tmp, path)
@@ -638,9 +617,10 @@ def check_output_location(out: str | Path, what: str = "output", *, folder: bool
     if not base.is_dir():
         raise InputError(f"{what} cannot be made: {base} is a file, not a folder", out)
     try:
-        fd, probe = tempfile.mkstemp(prefix=".plantreg-probe.", dir=base)
-        os.close(fd)
-        os.unlink(probe)
+        with signals.deferred():
+            fd, probe = tempfile.mkstemp(prefix=".plantreg-probe.", dir=base)
+            os.close(fd)
+            os.unlink(probe)
     except OSError as e:
         raise InputError(f"{what} cannot be written: {base} is not writable ({e.strerror or e})", out) from None
     return out
@@ -667,10 +647,11 @@ def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path
     old: Path | None = None
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+        with signals.deferred():
+            tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
         yield tmp
         _publish(tmp, is_dir=True)
-        with _signals_deferred():
+        with signals.deferred():
             if os.path.lexists(out):
                 old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
                 os.replace(out, old / "x")
@@ -717,12 +698,13 @@ def atomic_files(paths: list[str | Path], remove: list[str | Path] = ()) -> Iter
         for p in finals:
             current = p
             p.parent.mkdir(parents=True, exist_ok=True)
-            fd, t = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".part{p.suffix}", dir=p.parent)
-            os.close(fd)
-            tmps[p] = Path(t)
+            with signals.deferred():
+                fd, t = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".part{p.suffix}", dir=p.parent)
+                os.close(fd)
+                tmps[p] = Path(t)
         current = None
         yield dict(tmps)
-        with _signals_deferred():
+        with signals.deferred():
             try:
                 for p in finals + stale:
                     current = p

@@ -1,3 +1,3 @@
-"""Running core work in a child process (cancellable, with progress), so that the GIL-holding
-steps of Open3D do not freeze a GUI thread.
+"""Core work in a child process (cancellable, with progress), so that GIL-holding steps do not
+freeze a GUI thread: :mod:`.process_job`. How child processes meet signals: :mod:`..signals`.
 """

@@ -1,31 +1,40 @@
-"""Run a long pure-Python routine in a child process, with the caller's progress and cancel.
+"""Child processes for long core work, with the caller's progress and cancel: the one place for them.
 
 Why: a routine that loops in Python (the joint bundle adjustment builds its Jacobian view by
-view; the error tables mesh every depth map) holds the GIL on a worker *thread* most of the
-time, and the GUI thread then waits for the GIL at every Qt call it makes -- the wizard froze
-for seconds while calibrating. In a child process the GUI thread keeps the GIL to itself.
+view; the error tables mesh every depth map) or holds the GIL inside one call (Open3D builds
+its ray casting BVH) holds the GIL on a worker *thread* most of the time, and the GUI thread
+then waits for the GIL at every Qt call it makes -- the wizard froze for seconds while
+calibrating. In a child process the GUI thread keeps the GIL to itself. Two ways:
 
-:func:`run_in_process` ``(fn, *args, progress=Reporter)`` calls ``fn(*args, progress=child
-Reporter)`` in a single long-lived worker process (``spawn``: no forked Qt state) and blocks the
-calling thread -- a GUI worker thread, never the GUI thread -- until it returns. Progress calls
-in the child are forwarded to ``progress``; cancelling ``progress`` sets an event that the
-child's Reporter checks at its next call, so the routine raises ``Cancelled`` as it would on a
-thread. A child that does not react within :data:`CANCEL_GRACE_S` (a long native call) is
-killed and a new one started on the next call. ``fn`` and its arguments must pickle (module-level
-functions of the core, dataclasses, numpy arrays); errors raised in the child are re-raised here.
+* :func:`run_in_process` ``(fn, *args, progress=Reporter)`` calls ``fn(*args, progress=child
+  Reporter)`` in a single long-lived worker process (``spawn``: no forked Qt state) and blocks
+  the calling thread -- a GUI worker thread, never the GUI thread -- until it returns. Progress
+  calls in the child are forwarded to ``progress``; cancelling ``progress`` sets an event that
+  the child's Reporter checks at its next call, so the routine raises ``Cancelled`` as it would
+  on a thread. A child that does not react within :data:`CANCEL_GRACE_S` (a long native call)
+  is ended and a new one started on the next call. For repeated jobs (the wizard's steps).
+* :func:`call_in_process` runs one routine in a fresh ``spawn`` process; a cancel ends it at
+  once (MNELAB's ``run_ica`` pattern). For one-off work whose result is small or on disk (e.g.
+  writing the demo, a landmark refinement).
 
-No Qt here: the child imports only ``fn``'s module.
+``fn``, its arguments and its result must pickle (module-level functions of the core,
+dataclasses, numpy arrays); a :class:`PlantregError` raised in the child is re-raised here.
+Every child runs :func:`~plantreg_gui.core.signals.child_init` (a signal to the process group
+makes it remove its temporary outputs) and is ended with
+:func:`~plantreg_gui.core.signals.stop_processes` (SIGTERM, a grace period, SIGKILL). No Qt here: the child imports only ``fn``'s module.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
 import itertools
-import multiprocessing as mp
 import queue
 import threading
+import time
+import traceback
 from typing import Any, Callable
 
+from .. import signals
 from ..errors import Cancelled, PlantregError
 from ..progress import CancelToken, Reporter, ensure_reporter
 
@@ -44,6 +53,7 @@ _child: dict[str, Any] = {}
 def _child_init(q, ev) -> None:
     import os
 
+    signals.child_init()
     _child["queue"], _child["cancel"], _child["parent"] = q, ev, os.getppid()
 
 
@@ -93,7 +103,7 @@ def _pool_locked() -> tuple[cf.ProcessPoolExecutor, Any, Any]:
 
             atexit.register(_kill_pool)
             _exit_hook.append(True)
-        ctx = mp.get_context("spawn")
+        ctx = signals.spawn_context()
         q, ev = ctx.Queue(), ctx.Event()
         _state["pool"] = cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=_child_init,
                                                 initargs=(q, ev))
@@ -108,9 +118,9 @@ def _kill_pool() -> None:
         _state.pop("cancel", None)
     if pool is None:
         return
-    for p in list(getattr(pool, "_processes", {}).values()):  # no public terminate()
-        p.terminate()
+    procs = signals.pool_processes(pool)
     pool.shutdown(wait=False, cancel_futures=True)
+    signals.stop_processes(procs, grace_s=2.0)
 
 
 def warm_up() -> None:
@@ -167,6 +177,66 @@ def run_in_process(fn: Callable[..., Any], *args: Any, progress: Reporter | None
 
 
 def _now() -> float:
-    import time
-
     return time.monotonic()
+
+
+# ---------------------------------------------------------------------- one routine, a fresh process
+def _one_child(fn: Callable[..., Any], args: tuple, kwargs: dict, q: Any) -> None:
+    signals.child_init()
+    last = [0.0]
+
+    def report(f: float, m: str) -> None:
+        now = time.monotonic()
+        if now - last[0] > 0.05:  # at most 20 messages a second through the pipe
+            last[0] = now
+            q.put(("progress", f, m))
+
+    try:
+        out = fn(*args, progress=Reporter(report), **kwargs)
+    except PlantregError as e:
+        q.put(("plantreg", str(e), ""))
+    except BaseException as e:  # noqa: BLE001 - every failure must reach the parent
+        q.put(("error", f"{type(e).__name__}: {e}", traceback.format_exc()))
+    else:
+        q.put(("done", out, None))
+
+
+def call_in_process(fn: Callable[..., Any], *args: Any, progress: Reporter | None = None, **kwargs: Any) -> Any:
+    """``fn(*args, progress=Reporter, **kwargs)`` in a child process; returns its result.
+
+    Raises :class:`~plantreg_gui.core.errors.Cancelled` (after terminating the child) when
+    ``progress`` is cancelled, :class:`PlantregError` with the child's message when it raised
+    one, ``RuntimeError`` for anything else (the child's traceback in the message)."""
+    rep = ensure_reporter(progress)
+    ctx = signals.spawn_context()  # never fork a process that runs Qt threads
+    q = ctx.Queue()
+    p = ctx.Process(target=_one_child, args=(fn, args, kwargs, q), daemon=True)
+    p.start()
+    try:
+        while True:
+            try:
+                kind, a, b = q.get(timeout=0.05)
+            except queue.Empty:
+                rep.check()
+                if not p.is_alive() and q.empty():
+                    raise RuntimeError(f"the worker process ended without a result (exit code {p.exitcode})")
+                continue
+            if kind == "progress":
+                rep(a, b)
+            elif kind == "done":
+                return a
+            elif kind == "plantreg":
+                raise PlantregError(a)
+            else:
+                raise RuntimeError(f"{a}\n{b}")
+    except BaseException:  # cancelled, failed, or this process is ending: so is the child
+        signals.stop_processes([p])
+        raise
+    finally:
+        p.join(5.0)
+        if p.is_alive():
+            p.kill()
+        q.close()
+
+
+__all__ = ["run_in_process", "call_in_process", "warm_up", "CANCEL_GRACE_S"]

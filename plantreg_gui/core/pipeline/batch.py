@@ -19,6 +19,8 @@
   (:func:`~plantreg_gui.core.io.imageio.atomic_output_dir`), so a dying worker leaves no
   half-written folder under the final name (only a hidden ``.NAME.*.part`` folder, which
   may be deleted).
+* Starting safely and sharing OUT (the scheduler's handshake, OUT's lock, ``batch.csv`` merged
+  with earlier runs' rows): :mod:`.batch_guard`.
 """
 
 from __future__ import annotations
@@ -35,13 +37,10 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 from ..errors import InputError
+from .batch_guard import BATCH_CSV, write_csv  # noqa: F401 - part of this module's interface
 
-BATCH_CSV = "batch.csv"
 #: Attempts of a job whose worker process died (the first run and one retry).
 MAX_ATTEMPTS = 2
-#: Columns of batch.csv before the per-camera case shares.
-CSV_COLUMNS = ("recording", "name", "status", "error", "out", "files", "seconds_total", "seconds_read",
-               "seconds_register", "seconds_write", "attempts", "worker")
 
 
 @dataclass
@@ -337,9 +336,13 @@ def _failed_row(job: Job, settings: BatchSettings, error: str, attempts: int) ->
 
 
 def _preload(workers: int = 1) -> None:
-    """Worker start-up: load the libraries once, before the first job is timed."""
+    """Worker start-up: load the libraries once, before the first job is timed; a terminating
+    signal to the process group makes the worker remove its partial output (core/signals.py)."""
     import os
 
+    from .. import signals
+
+    signals.child_init()
     from ..export import export  # noqa: F401
     from ..registration import register, sampling  # noqa: F401
     from ..geometry.o3d_core import open3d_core
@@ -359,11 +362,11 @@ def run_local(settings: BatchSettings, jobs: list[Job], workers: int) -> Iterato
     finished is submitted again; a job that was running in a dying pool twice is reported
     failed (it may be what kills the worker, e.g. by running out of memory).
     """
-    import multiprocessing
-
     attempts = {j.name: 0 for j in jobs}
     todo = list(jobs)
-    ctx = multiprocessing.get_context("spawn")  # no fork of a process with threads
+    from .. import signals
+
+    ctx = signals.spawn_context()  # no fork of a process with threads
     # the workers are the parallelism: a BLAS thread pool per worker only contends with the others
     # (a 204 x 204 eigen-decomposition for a preview took seconds with 2 workers x 2 BLAS threads)
     threads = str(max(1, (os.cpu_count() or 1) // max(1, workers)))
@@ -381,50 +384,68 @@ def run_local(settings: BatchSettings, jobs: list[Job], workers: int) -> Iterato
 
 def _pool_rows(settings: BatchSettings, todo: list[Job], workers: int, attempts: dict[str, int],
                ctx) -> Iterator[dict[str, Any]]:
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
+    from concurrent.futures import ProcessPoolExecutor
+
+    from .. import signals
 
     while todo:
         with ProcessPoolExecutor(max_workers=max(1, min(workers, len(todo))), mp_context=ctx,
                                  initializer=_preload, initargs=(workers,)) as pool:
-            # at most one job per worker in flight: when the pool breaks, exactly the jobs that
-            # were running lose an attempt, not the ones still waiting
             queue, todo = todo, []
-            futures: dict = {}
-            broken = False
-            while (queue and not broken) or futures:
-                while queue and not broken and len(futures) < max(1, workers):
-                    j = queue.pop(0)
-                    try:
-                        futures[pool.submit(run_job, settings, j)] = j
-                    except BrokenProcessPool:
-                        broken = True
-                        queue.insert(0, j)
-                if not futures:
-                    break
-                done, _ = wait(set(futures), return_when=FIRST_COMPLETED)
-                for f in done:
-                    j = futures.pop(f)
-                    try:
-                        row = f.result()
-                    except BrokenProcessPool:
-                        broken = True
-                        attempts[j.name] += 1
-                        if attempts[j.name] >= MAX_ATTEMPTS:
-                            yield _failed_row(j, settings, "worker process died twice while registering it "
-                                              "(killed, or out of memory)", attempts[j.name])
-                        else:
-                            todo.append(j)
-                        continue
-                    except Exception as e:  # pragma: no cover - run_job does not raise
-                        yield _failed_row(j, settings, f"internal error ({type(e).__name__}: {e})",
-                                          attempts[j.name] + 1)
-                        continue
-                    row["attempts"] = attempts[j.name] + 1
-                    yield row
+            try:
+                broken = yield from _pool_round(settings, pool, queue, todo, workers, attempts)
+            except BaseException:
+                # a signal, an error, or the caller stopped: the workers remove their partial
+                # outputs and end, rather than the pool waiting for their jobs to finish
+                signals.stop_processes(signals.pool_processes(pool))
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
             todo += queue
             if broken:
                 pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _pool_round(settings: BatchSettings, pool, queue: list[Job], todo: list[Job], workers: int,
+                attempts: dict[str, int]):
+    """Run ``queue``'s jobs on ``pool`` until it is empty or the pool breaks; jobs to run again
+    are appended to ``todo`` (those not started stay in ``queue``). Returns whether it broke."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    # at most one job per worker in flight: when the pool breaks, exactly the jobs that
+    # were running lose an attempt, not the ones still waiting
+    futures: dict = {}
+    broken = False
+    while (queue and not broken) or futures:
+        while queue and not broken and len(futures) < max(1, workers):
+            j = queue.pop(0)
+            try:
+                futures[pool.submit(run_job, settings, j)] = j
+            except BrokenProcessPool:
+                broken = True
+                queue.insert(0, j)
+        if not futures:
+            break
+        done, _ = wait(set(futures), return_when=FIRST_COMPLETED)
+        for f in done:
+            j = futures.pop(f)
+            try:
+                row = f.result()
+            except BrokenProcessPool:
+                broken = True
+                attempts[j.name] += 1
+                if attempts[j.name] >= MAX_ATTEMPTS:
+                    yield _failed_row(j, settings, "worker process died twice while registering it "
+                                      "(killed, or out of memory)", attempts[j.name])
+                else:
+                    todo.append(j)
+                continue
+            except Exception as e:  # pragma: no cover - run_job does not raise
+                yield _failed_row(j, settings, f"internal error ({type(e).__name__}: {e})", attempts[j.name] + 1)
+                continue
+            row["attempts"] = attempts[j.name] + 1
+            yield row
+    return broken
 
 
 def run_dask(settings: BatchSettings, jobs: list[Job], scheduler: str) -> Iterator[dict[str, Any]]:
@@ -458,26 +479,6 @@ def run_dask(settings: BatchSettings, jobs: list[Job], scheduler: str) -> Iterat
                 row = _failed_row(j, settings, f"Dask: {type(e).__name__}: {e}".splitlines()[0], MAX_ATTEMPTS)
             f.release()
             yield row
-
-
-# ---------------------------------------------------------------------- the table
-def csv_columns(rows: list[dict[str, Any]]) -> list[str]:
-    extra: list[str] = []
-    for r in rows:
-        extra += [k for k in r if k not in CSV_COLUMNS and k not in extra]
-    return [*CSV_COLUMNS, *extra]
-
-
-def write_csv(path: str | Path, rows: list[dict[str, Any]]) -> None:
-    """``batch.csv`` (atomically): one row per recording, in the order given."""
-    from ..io.imageio import atomic_write_text
-
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=csv_columns(rows), extrasaction="ignore", lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: ("" if v is None else v) for k, v in r.items()})
-    atomic_write_text(path, buf.getvalue())
 
 
 __all__ = ["BatchSettings", "Job", "plan", "read_manifest", "expand_inputs", "job_hash", "run_job", "run",

@@ -25,9 +25,9 @@ blur in its own pixels (2 sigma hold 95 % of the blur's weight), and ``registrat
 off, in its pixels, the mapping into the camera may be (the calibration's uncertainty: a point
 projected 3 px beside where the camera really saw it reads the soil beside a leaf rim even with a
 sharp lens). ``registration_px`` is a camera key too; without it, a rig fitted from landmarks
-(``calibration.method`` "landmarks", ``plantreg fit-rig``) supplies the camera's median landmark
-residual from its calibration record (``calibration.per_camera.<camera>.median_px``), and any
-other rig 0. Points within ``r`` are flagged.
+(``plantreg fit-rig`` in every variant, the landmark page) supplies it from its calibration record
+(``core/camera/record.py``: the larger of the camera's fitted and leave-one-out median landmark
+residual; for older records the fitted median), and any other rig 0. Points within ``r`` are flagged.
 
 What it does not catch: silhouettes the depth camera did not measure (a surface it could not see
 at all, thin structures below its resolution, a leaf's fold turning away from the source inside
@@ -41,6 +41,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera.camera import Camera
+from ..camera.record import CalibrationRecord
 from ..geometry.raycast import MeshScene, segment_dirs
 
 
@@ -53,16 +54,12 @@ def _px_key(cam: Camera, key: str, default: float = 0.0) -> float:
 
 
 def calibration_residual_px(rig_extra: dict, camera: str) -> float:
-    """The median landmark residual (px) of ``camera`` in a rig fitted from landmarks (the rig's
-    ``calibration`` record, ``plantreg fit-rig``); 0 for any other rig or a camera not fitted."""
-    cal = rig_extra.get("calibration") if isinstance(rig_extra, dict) else None
-    if not isinstance(cal, dict) or cal.get("method") != "landmarks":
-        return 0.0
-    try:
-        v = float(cal.get("per_camera", {}).get(camera, {}).get("median_px", 0.0))
-    except (AttributeError, TypeError, ValueError):
-        return 0.0
-    return v if np.isfinite(v) and v > 0 else 0.0
+    """How far off, in ``camera``'s pixels, a rig fitted to landmarks may map into it (its
+    calibration record's :meth:`~..camera.record.CalibrationRecord.registration_px`, whichever way
+    the rig was fitted: ``fit-rig``, ``--refine``, ``--silhouette``, the landmark page, a nudge);
+    0 for any other rig or a camera not fitted."""
+    rec = CalibrationRecord.of(rig_extra)
+    return rec.registration_px(camera) if rec is not None else 0.0
 
 
 def mixed_radius(cam: Camera, base_px: float, registration_px: float = 0.0) -> float:

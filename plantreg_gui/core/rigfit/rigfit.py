@@ -81,6 +81,33 @@ class Priors:
     robust_px: float = 3.0
 
 
+#: ``--prior`` keys -> :class:`Priors` fields
+PRIOR_KEYS = {"rotation": "rotation_deg", "position": "position_m", "focal": "focal_rel",
+              "principal": "principal_rel", "k1": "k1", "click": "click_px", "robust": "robust_px"}
+
+
+def parse_priors(spec: str | None, base: Priors | None = None) -> Priors:
+    """``"focal=0.2,rotation=10"`` -> :class:`Priors` (the others as ``base`` or the defaults).
+    Keys: rotation (degrees), position (m), focal (relative), principal (of the image width), k1,
+    click (px), robust (px)."""
+    pr = Priors(**asdict(base)) if base is not None else Priors()
+    for it in (spec or "").split(","):
+        if not it.strip():
+            continue
+        k, eq, v = it.partition("=")
+        k = k.strip()
+        if not eq or k not in PRIOR_KEYS:
+            raise InputError(f"--prior takes KEY=VALUE with KEY one of {', '.join(PRIOR_KEYS)}, got '{it.strip()}'")
+        try:
+            val = float(v)
+        except ValueError:
+            raise InputError(f"--prior {k}: '{v}' is not a number") from None
+        if not (val > 0 and math.isfinite(val)):
+            raise InputError(f"--prior {k}: must be a positive number, got '{v}'")
+        setattr(pr, PRIOR_KEYS[k], val)
+    return pr
+
+
 @dataclass
 class RecordingLandmarks:
     """One recording's landmarks: ``depth_m`` (H, W) metres along the depth camera's axis
@@ -89,6 +116,9 @@ class RecordingLandmarks:
     name: str
     depth_m: np.ndarray
     points: list[Landmark]
+    #: put a landmark whose depth lies behind the surface beside it onto that surface
+    #: (:func:`depth_jump`; a click just past a leaf's edge reads the ground) -- else leave it out
+    snap_depth: bool = True
 
 
 @dataclass
@@ -213,6 +243,49 @@ def landmark_depth(depth_m: np.ndarray, uv: np.ndarray, radius: int = 3, min_sup
     if np.isfinite(zc) and z.min() - 0.005 <= zc <= z.max() + 0.005:
         return float(zc), ""
     return float(np.median(z)), ""
+
+
+def depth_jump(depth_m: np.ndarray, uv: np.ndarray, z: float, ground_z: float | None = None, radius: int = 8
+               ) -> tuple[str, float]:
+    """Whether the depth ``z`` read under the click ``uv`` (2,) lies on a surface well behind one
+    right beside it (the ground or a leaf behind, seen through a notch or just past a leaf's
+    edge): two thirds of the pixels with depth in the (2r+1)^2 window lie more than 5 cm + 5 %
+    nearer, or, for a depth within 5 cm of the ground plane ``ground_z``, a quarter of those in
+    the 7x7 core. Returns ``("", nan)`` or ``(reason, z_snapped)``: the nearer surface's
+    depth at the click (a plane in inverse depth through its pixels, weighted towards the click)."""
+    H, W = depth_m.shape
+    u0, v0 = int(round(float(uv[0]))), int(round(float(uv[1])))
+    a0, a1, b0, b1 = max(0, v0 - radius), min(H, v0 + radius + 1), max(0, u0 - radius), min(W, u0 + radius + 1)
+    win = np.asarray(depth_m[a0:a1, b0:b1], dtype=np.float64)
+    ok = np.isfinite(win) & (win > 0)
+    if ok.sum() < 10 or not np.isfinite(z):
+        return "", math.nan
+    near = ok & (win < z - (0.05 + 0.05 * z))
+    cv, cu = v0 - a0, u0 - b0
+    core_ok, core_near = (m[max(0, cv - 3):cv + 4, max(0, cu - 3):cu + 4] for m in (ok, near))
+    at_ground = ground_z is not None and z > ground_z - 0.05
+    # surrounded by a nearer surface (a notch, a hole); or at the ground's depth right beside one
+    # (a click just past a leaf's edge; a lower leaf beside an upper one's edge is a fair landmark)
+    if near.sum() < 0.65 * ok.sum() and not (at_ground and core_ok.sum() and core_near.sum() >= 0.25 * core_ok.sum()):
+        return "", math.nan
+    vv, uu = np.nonzero(near)
+    zn = win[near]
+    lead = np.median(zn)
+    keep = np.abs(zn - lead) < 0.03 + 0.03 * lead  # the main nearer surface, not a mix of several
+    du, dv = uu[keep] + b0 - uv[0], vv[keep] + a0 - uv[1]
+    zs = inverse_depth_plane(zn[keep], du, dv, np.exp(-(du ** 2 + dv ** 2) / (2.0 * (0.5 * radius) ** 2)))
+    if not (np.isfinite(zs) and zn[keep].min() - 0.02 <= zs <= zn[keep].max() + 0.02):
+        zs = float(lead)
+    where = " (the ground's depth)" if at_ground else ""
+    return (f"depth {z:.3f} m{where} lies {100 * (z - lead):.0f} cm behind the surface filling "
+            f"{100 * near.sum() / ok.sum():.0f} % of its {2 * radius + 1}x{2 * radius + 1} neighbourhood "
+            f"({lead:.3f} m) and reaching to within {_nearest(near, cv, cu):.0f} px of it: a click past a leaf's "
+            "edge or through a notch"), float(zs)
+
+
+def _nearest(mask: np.ndarray, i: int, j: int) -> float:
+    vv, uu = np.nonzero(mask)
+    return float(np.min(np.hypot(vv - i, uu - j))) if len(vv) else math.inf
 
 
 # ---------------------------------------------------------------------- the fit
@@ -391,6 +464,15 @@ def _collect(rig: Rig, recordings: Sequence[RecordingLandmarks], cameras: set[st
             if not cams:
                 continue
             z, reason = landmark_depth(rec.depth_m, lm.depth_uv)
+            if np.isfinite(z):
+                jump, z_snap = depth_jump(rec.depth_m, lm.depth_uv, z, rig.ground_z)
+                if jump and rec.snap_depth:
+                    rejected.append({"recording": rec.name, "index": li, "note": lm.note,
+                                     "depth_uv": [float(v) for v in lm.depth_uv], "reason": jump,
+                                     "depth_m": float(z), "snapped_to_m": z_snap})
+                    z = z_snap
+                elif jump:
+                    z, reason = math.nan, jump + "; left out (--no-snap-depth)"
             if not np.isfinite(z):
                 rejected.append({"recording": rec.name, "index": li, "note": lm.note,
                                  "depth_uv": [float(v) for v in lm.depth_uv], "reason": reason})
@@ -518,8 +600,19 @@ def _solve(rig: Rig, recordings: Sequence[RecordingLandmarks], free: frozenset[s
     r = np.linalg.norm(prob.residuals_px(x), axis=1)
     thr = max(4.0 * priors.robust_px, 4.0 * float(np.median(r)))
     out = r > thr
-    if out.any() and (~out).sum() >= 6:
+    if out.any():
         keep = ~out
+        for c in cams:
+            n_left = len({o.lm for o, k in zip(obs, keep) if k and o.cam == c})
+            need = _min_landmarks(sum(FREE_ITEMS[i] for i in _free_for(free, c)))
+            if check and n_left < need:
+                bad = sorted(((keys[o.lm], float(ri)) for o, ri, k in zip(obs, r, out) if k and o.cam == c),
+                             key=lambda t: -t[1])
+                raise InputError(
+                    f"camera '{c}': {len(bad)} of its landmarks are off by more than {thr:.0f} px after the fit "
+                    f"({', '.join(f'{recordings[a].name} #{b} {v:.0f} px' for (a, b), v in bad[:4])}); "
+                    f"{n_left} left, fewer than the {need} its fit needs: check those landmarks (depth, the "
+                    "same feature in both images) or add more")
         prob2 = _Problem(rig, duv, z, [o for o, k in zip(obs, keep) if k], cams, free, priors, rig)
         prob2.no_pose_prior = prob.no_pose_prior
         if all(len(prob2.obs_idx[c]) >= 4 for c in cams):
@@ -530,39 +623,68 @@ def _solve(rig: Rig, recordings: Sequence[RecordingLandmarks], free: frozenset[s
 
 
 def fit_rig(rig: Rig, recordings: Sequence[RecordingLandmarks], *, free: Iterable[str] = frozenset(),
-            priors: Priors | None = None, cameras: Iterable[str] | None = None, loo: bool | None = None) -> FitResult:
+            priors: Priors | None = None, cameras: Iterable[str] | None = None, loo: bool | None = None,
+            max_median_px: float | None = None) -> FitResult:
     """Fit ``rig``'s cameras to the landmarks of ``recordings`` (all jointly).
 
-    ``free``: items of :func:`parse_free`; ``cameras``: restrict to these cameras (default all
-    with landmarks); ``loo``: leave-one-recording-out residuals (None = when there are >= 2
-    recordings; True with one recording raises :class:`InputError`).
+    ``free``: items of :func:`parse_free`; ``cameras``: fit these cameras (each must have enough
+    landmarks); default: every camera with enough landmarks -- a camera with too few that is not
+    named in ``free`` keeps its start pose and is named in a warning (a partial fit).
+    ``loo``: leave-one-recording-out residuals (None = when there are >= 2 recordings; True with
+    one recording raises :class:`InputError`); a camera without a leave-one-recording-out figure
+    gets leave-one-landmark-out instead. ``max_median_px``: a camera whose fitted median residual
+    exceeds it raises :class:`InputError` (the landmarks and the rig disagree: wrong pairs, wrong
+    start, wrong camera model).
     Raises :class:`InputError` for degenerate input (too few landmarks, collinear, all at one
-    distance when focal is free, ...). Returns the fitted rig, a JSON-able report and warnings.
+    distance when focal is free, a camera left with too few after outlier rejection, ...).
+    Returns the fitted rig, a JSON-able report and warnings.
     """
     t0 = time.perf_counter()
     free = frozenset(free) if not isinstance(free, str) else parse_free(free)
     priors = priors or Priors()
     cams_sel = set(cameras) if cameras is not None else None
+    loo_asked = loo
     if loo and len(recordings) < 2:
         raise InputError("leave-one-recording-out needs landmarks from at least two recordings")
     dname = rig.depth().name
     for it in free:
         if ":" in it and it.split(":", 1)[0] not in rig.names:
             raise InputError(f"cannot free '{it}': the rig has no camera '{it.split(':', 1)[0]}'")
+    if cams_sel is not None:
+        for c in sorted(cams_sel):
+            rig.camera(c)  # unknown camera -> InputError naming the rig's cameras
+    not_fitted = {} if cams_sel is not None else _thin_cameras(rig, recordings, free)
+    if not_fitted:
+        cams_sel = {o.cam for o in _collect(rig, recordings, None)[3]} - set(not_fitted)
+        if not cams_sel:  # nothing to fit: the first camera's own message
+            cams_sel = None
+            not_fitted = {}
     prob, x, keys, rejected, notes, out = _solve(rig, recordings, free, priors, cams_sel)
     fitted = prob.to_rig(x)
+    try:  # a rig no tool could load afterwards (a lens model folding the image) is no result
+        Rig.from_dict(fitted.to_dict())
+    except InputError as e:
+        raise InputError(f"the fitted rig is not usable ({e.detail}): the start lens is too far from the real one "
+                         "for the terms freed -- start from a better lens (the camera's own calibration, a focal "
+                         "length) or free fewer terms") from None
     r = prob.residuals_px(x)
     rows = []
     for i, o in enumerate(prob.obs):
         ri, li = keys[o.lm]
         rows.append({"recording": recordings[ri].name, "index": li, "note": recordings[ri].points[li].note,
                      "camera": o.cam, "residual_px": float(np.hypot(*r[i])), "du": float(r[i, 0]),
-                     "dv": float(r[i, 1]), "outlier": bool(out[i])})
+                     "dv": float(r[i, 1]), "depth_m": float(prob.z[o.lm]), "outlier": bool(out[i])})
     rows.sort(key=lambda d: -d["residual_px"])
+    snapped = [d for d in rejected if "snapped_to_m" in d]
+    rejected = [d for d in rejected if "snapped_to_m" not in d]
     warnings = [f"landmark {d['index']} of {d['recording']} ({d['note'] or 'no note'}) not used: {d['reason']}"
                 for d in rejected]
+    warnings += [f"landmark {d['index']} of {d['recording']} ({d['note'] or 'no note'}): {d['reason']}; snapped to "
+                 f"{d['snapped_to_m']:.3f} m" for d in snapped]
     warnings += [f"{d['camera']}: landmark {d['index']} of {d['recording']} is off by {d['residual_px']:.1f} px "
                  "and was left out of the fit (an outlier)" for d in rows if d["outlier"]]
+    warnings += [f"camera '{c}' not fitted, kept at its start pose: {why}" for c, why in sorted(not_fitted.items())]
+    warnings += [f"{c}: {n}" for c, n in sorted(notes.items())]
     report: dict[str, Any] = {
         "method": "landmarks",
         "free": sorted(free),
@@ -571,14 +693,26 @@ def fit_rig(rig: Rig, recordings: Sequence[RecordingLandmarks], *, free: Iterabl
         "landmarks_used": len(keys),
         "observations_used": int((~out).sum()),
         "landmarks_rejected": rejected,
+        "landmarks_snapped": snapped,
         "start_notes": notes,
         "per_camera": _stats_by(rows, ("camera",)),
         "per_recording": _nested_stats(rows),
         "residuals": rows,
         "changes": _changes(rig, fitted, prob.cams + [dname]),
+        "not_fitted": not_fitted,
     }
+    if max_median_px is not None:
+        bad = {c: s["median_px"] for c, s in report["per_camera"].items() if s["median_px"] > max_median_px}
+        if bad:
+            c, m = max(bad.items(), key=lambda t: t[1])
+            raise InputError(
+                f"camera '{c}': median landmark residual {m:.1f} px after the fit, above the {max_median_px:g} px a "
+                "usable rig leaves (--max-median): the landmarks do not fit one camera model -- check the pairs "
+                "(the same feature in both images?), the start rig (turn, lens) or what is freed")
     if loo is None:
         loo = len(recordings) >= 2
+    report["landmark_depths"] = [{"recording": recordings[ri].name, "index": li, "depth_m": float(prob.z[L])}
+                                 for L, (ri, li) in enumerate(keys)]
     if loo:
         report["leave_one_out"] = _leave_one_out(rig, recordings, free, priors, cams_sel)
         for rec, v in report["leave_one_out"]["per_recording"].items():
@@ -589,6 +723,15 @@ def fit_rig(rig: Rig, recordings: Sequence[RecordingLandmarks], *, free: Iterabl
                              for c, s in v.items() if "unavailable" in s]
     else:
         report["leave_one_out"] = {"unavailable": "needs landmarks from at least two recordings"}
+    lolo_cams = set(prob.cams) - set(report["leave_one_out"].get("per_camera", {}))
+    if lolo_cams and loo_asked is not False:
+        lolo = _leave_one_landmark_out(rig, recordings, free, priors, prob.cams, lolo_cams,
+                                       {(keys[o.lm], o.cam) for o, k in zip(prob.obs, out) if k})
+        report["leave_one_landmark_out"] = lolo
+        for c, s in lolo.items():
+            if "unavailable" in s:
+                warnings.append(f"{c}: no leave-one-out figure ({s['unavailable']}): its fitted residuals are the "
+                                "only measure, and they flatter the rig")
     report["time_s"] = round(time.perf_counter() - t0, 3)
     return FitResult(fitted, report, warnings)
 
@@ -678,6 +821,90 @@ def _leave_one_out(rig: Rig, recordings: Sequence[RecordingLandmarks], free: fro
     return {"per_recording": per_rec, "per_camera": _stats_by(held, ("camera",)) if held else {}}
 
 
+def _thin_cameras(rig: Rig, recordings: Sequence[RecordingLandmarks], free: frozenset[str]) -> dict[str, str]:
+    """Cameras with fewer landmarks (with depth) than their fit needs, not named in ``free``
+    (a camera asked for by name is refused instead): camera -> reason."""
+    obs = _collect(rig, recordings, None)[3]
+    out = {}
+    for c in sorted({o.cam for o in obs}):
+        if any(it.startswith(f"{c}:") for it in free):
+            continue
+        n = len({o.lm for o in obs if o.cam == c})
+        need = _min_landmarks(sum(FREE_ITEMS[k] for k in _free_for(free, c)))
+        if n < need:
+            out[c] = f"{n} landmark(s) with depth, fewer than the {need} its fit needs"
+    return out
+
+
+def _leave_one_landmark_out(rig: Rig, recordings: Sequence[RecordingLandmarks], free: frozenset[str],
+                            priors: Priors, cams: list[str], report_cams: set[str],
+                            outliers: set[tuple[tuple[int, int], str]]) -> dict[str, Any]:
+    """Per camera in ``report_cams``: each of its landmarks (outliers of the full fit aside)
+    measured against the rig fitted without that landmark (in every camera). For a camera whose
+    recordings cannot be left out one at a time."""
+    duv, z, keys, obs, _rej = _collect(rig, recordings, set(cams))
+    held: dict[str, list[float]] = {c: [] for c in report_cams}
+    why: dict[str, str] = {}
+    for L, key in enumerate(keys):
+        mine = [o.cam for o in obs if o.lm == L and o.cam in report_cams and (key, o.cam) not in outliers]
+        if not mine:
+            continue
+        try:
+            prob, x, *_ = _solve(rig, recordings, free, priors, set(cams),
+                                 exclude={(key[0], key[1], c) for c in cams})
+        except InputError as e:
+            for c in mine:
+                why.setdefault(c, str(e))
+            continue
+        ri, li = key
+        fitted = prob.to_rig(x)
+        rows, _ = evaluate_landmarks(fitted, [RecordingLandmarks(recordings[ri].name, recordings[ri].depth_m,
+                                                                 [recordings[ri].points[li]])],
+                                     [c for c in mine if c in prob.cams])
+        for d in rows:
+            held[d["camera"]].append(d["residual_px"])
+    out: dict[str, Any] = {}
+    for c in sorted(report_cams):
+        if held[c]:
+            out[c] = {**_stats(held[c]), "kind": "leave-one-landmark-out"}
+        else:
+            out[c] = {"unavailable": why.get(c, "no landmark of this camera can be left out")}
+    return out
+
+
+def keep_not_worse(before: Rig, after: Rig, cams_report: dict[str, Any], stage: str,
+                   landmark_slack_px: float = 0.25) -> tuple[Rig, list[str]]:
+    """After an image-based stage (``--refine``, ``--silhouette``): every camera of
+    ``cams_report`` (camera -> the stage's report: ``start_cost``/``end_cost``, landmark errors
+    before/after) whose own cost rose, or whose landmarks' median error rose by more than
+    ``landmark_slack_px``, gets its camera from ``before`` back (``"reverted"`` in its report).
+    Returns the rig and a warning per reverted camera."""
+    out = _copy_rig(after)
+    warnings = []
+    for name, r in cams_report.items():
+        if not isinstance(r, dict):
+            continue
+        why = []
+        sc, ec = r.get("start_cost"), r.get("end_cost")
+        if isinstance(sc, (int, float)) and isinstance(ec, (int, float)) and ec > sc * (1 + 1e-9) + 1e-12:
+            why.append(f"its {stage} cost rose from {sc:.4g} to {ec:.4g}")
+        if isinstance(r.get("landmarks_px"), dict):  # refine: {"before": stats, "after": stats}
+            b, a = (r["landmarks_px"].get(k, {}).get("median_px") for k in ("before", "after"))
+        else:  # silhouette: per view lists
+            vb = [e for v in r.get("views", {}).values() for e in v.get("landmarks_px", [])]
+            va = [e for v in r.get("views", {}).values() for e in v.get("landmarks_px_after", [])]
+            b, a = (float(np.median(vb)), float(np.median(va))) if vb and va else (None, None)
+        if b is not None and a is not None and a > b + landmark_slack_px:
+            why.append(f"its landmarks' median error rose from {b:.2f} to {a:.2f} px")
+        if why:
+            out.cameras = [Camera.from_dict(before.camera(name).to_dict()) if c.name == name else c
+                           for c in out.cameras]
+            r["reverted"] = "; ".join(why)
+            warnings.append(f"{name}: {stage} made it worse ({r['reverted']}): its camera before the {stage} is "
+                            "kept")
+    return out, warnings
+
+
 def _changes(start: Rig, fitted: Rig, names: list[str]) -> dict[str, Any]:
     out = {}
     for n in names:
@@ -710,22 +937,34 @@ def load_recording_landmarks(rig: Rig, landmarks: LandmarkSet) -> list[Recording
     return out
 
 
-def fit_rig_from_file(rig: Rig, landmarks: LandmarkSet, **kw: Any) -> FitResult:
-    """:func:`fit_rig` on the recordings named in a landmarks file (checked against ``rig``)."""
+def fit_rig_from_file(rig: Rig, landmarks: LandmarkSet, snap_depth: bool = True, **kw: Any) -> FitResult:
+    """:func:`fit_rig` on the recordings named in a landmarks file (checked against ``rig``);
+    ``snap_depth``: see :attr:`RecordingLandmarks.snap_depth`."""
     landmarks.check(rig)
     landmarks.check_recordings()
-    return fit_rig(rig, load_recording_landmarks(rig, landmarks), **kw)
+    recs = load_recording_landmarks(rig, landmarks)
+    for r in recs:
+        r.snap_depth = snap_depth
+    return fit_rig(rig, recs, **kw)
 
 
 def format_report(report: dict[str, Any], worst: int = 10) -> str:
     """The per-camera residual table, leave-one-out and the worst landmarks, as text."""
     lines = [f"landmark fit: {report['landmarks_used']} landmarks, {report['observations_used']} pixel pairs used"
              + (f", free: {', '.join(report['free'])}" if report["free"] else "")]
-    loo = report.get("leave_one_out", {}).get("per_camera", {})
+    loo = dict(report.get("leave_one_out", {}).get("per_camera", {}))
+    lolo = {c: s for c, s in report.get("leave_one_landmark_out", {}).items() if "median_px" in s}
     lines.append(f"  {'camera':<16}{'n':>5}{'median px':>11}{'p90 px':>9}{'max px':>9}{'LOO median':>12}")
     for c, s in report["per_camera"].items():
-        lo = f"{loo[c]['median_px']:12.2f}" if c in loo else f"{'-':>12}"
+        lo = (f"{loo[c]['median_px']:12.2f}" if c in loo else f"{lolo[c]['median_px']:11.2f}L" if c in lolo
+              else f"{'none':>12}")
         lines.append(f"  {c:<16}{s['n']:>5}{s['median_px']:11.2f}{s['p90_px']:9.2f}{s['max_px']:9.2f}{lo}")
+    if lolo:
+        lines.append("  (L: leave-one-landmark-out; the others leave one recording out)")
+    for c, n in sorted(report.get("start_notes", {}).items()):
+        lines.append(f"  start, {c}: {n}")
+    for c, n in sorted(report.get("not_fitted", {}).items()):
+        lines.append(f"  NOT FITTED, {c}: kept at its start pose ({n})")
     per_rec = report.get("per_recording", {})
     if len(per_rec) > 1:
         lines.append("  per recording (median px):")
@@ -734,5 +973,6 @@ def format_report(report: dict[str, Any], worst: int = 10) -> str:
     lines.append("  worst landmarks:")
     for d in report["residuals"][:worst]:
         lines.append(f"    {d['residual_px']:7.2f} px  {d['camera']:<14} {d['recording']} #{d['index']}"
+                     + (f" at {d['depth_m']:.3f} m" if "depth_m" in d else "")
                      + (f" ({d['note']})" if d["note"] else "") + ("  [outlier]" if d["outlier"] else ""))
     return "\n".join(lines)
