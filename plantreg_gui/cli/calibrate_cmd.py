@@ -224,6 +224,10 @@ def _print_summary(session, detections, cal, report) -> None:
             if u.rotation_deg is not None:
                 line += f"; pose vs {cal.reference}: +- {u.rotation_deg:.3f} deg, +- {u.translation_mm:.2f} mm"
             print(line)
+            if u.sigma_boards is not None:
+                far = ", ".join(f"{'far' if f >= 100 else f'{f:g}x'} {v:.2f}" for f, v in u.boards_by_distance.items())
+                print(f"  {'':14s} among the boards (mrcal): median {float(np.median(u.sigma_boards)):.2f} px"
+                      + (f"; at other distances: {far}" if far else ""))
     if cal.flipped:
         print(f"symmetric board: corner order of {len(cal.flipped)} view(s) turned by 180 degrees to agree with the rig")
     cams = list(session.cameras)
