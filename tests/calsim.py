@@ -125,13 +125,38 @@ def true_projection_errors(cal, truth: Rig, cam: str) -> tuple[np.ndarray, np.nd
     sigma_rig), each (H, W)."""
     u = cal.uncertainty[cam]
     est, tru = cal.rig.camera(cam), truth.camera(cam)
-    uu, vv = np.meshgrid(u.grid_u, u.grid_v)
-    uv = np.c_[uu.ravel(), vv.ravel()]
-    xy = est.undistort_normalized(uv)
-    X_cam = np.c_[xy, np.ones(len(xy))] * u.distance_m
+    X_cam = _grid_points(u, est)
     q_i = cv2.projectPoints(X_cam, np.zeros(3), np.zeros(3), tru.K, tru.dist)[0].reshape(-1, 2)
-    e_i = np.linalg.norm(q_i - uv, axis=1).reshape(uu.shape)
+    uv = _grid_uv(u)
+    e_i = np.linalg.norm(q_i - uv, axis=1).reshape(u.sigma_intrinsics.shape)
     X_rig = est.to_rig(X_cam)
     q_r, _z = tru.project(X_rig)
-    e_r = np.linalg.norm(q_r - uv, axis=1).reshape(uu.shape)
+    e_r = np.linalg.norm(q_r - uv, axis=1).reshape(u.sigma_intrinsics.shape)
     return e_i, u.sigma_intrinsics, e_r, u.sigma_rig
+
+
+def _grid_uv(u) -> np.ndarray:
+    uu, vv = np.meshgrid(u.grid_u, u.grid_v)
+    return np.c_[uu.ravel(), vv.ravel()]
+
+
+def _grid_points(u, est: Camera) -> np.ndarray:
+    xy = est.undistort_normalized(_grid_uv(u))
+    return np.c_[xy, np.ones(len(xy))] * u.distance_m
+
+
+def true_among_boards_errors(cal, truth: Rig, cam: str, poses) -> tuple[np.ndarray, np.ndarray]:
+    """mrcal's "mean frames" truth: each grid point at the working distance, put on every
+    estimated board, carried to the same place on the true board (``poses``: the true
+    (R_rig_board, t_rig_board) of pose_001, pose_002, ...), averaged and projected by the true
+    camera. (err (H, W) px, the reported ``sigma_boards``)."""
+    u = cal.uncertainty[cam]
+    est, tru = cal.rig.camera(cam), truth.camera(cam)
+    X_rig = est.to_rig(_grid_points(u, est))
+    X_true = np.zeros_like(X_rig)
+    for p, (Re, te) in cal.board_poses.items():
+        Rt, tt = poses[int(p.split("_")[1]) - 1]
+        X_true += ((X_rig - te) @ Re) @ Rt.T + tt
+    q, _z = tru.project(X_true / len(cal.board_poses))
+    e = np.linalg.norm(q - _grid_uv(u), axis=1).reshape(u.sigma_boards.shape)
+    return e, u.sigma_boards

@@ -63,3 +63,18 @@ def lepton_session(shared: Path, dst: Path, stamps: list[str] | None = None) -> 
         "board": {"type": "chessboard", "columns": 4, "rows": 6, "square_size": 0.055},
         "cameras": {"rgb": {"modality": "visible"}, "thermal": {"modality": "thermal"}}}))
     return dst
+
+
+def writable_copy(src: Path, dst: Path) -> Path:
+    """A copy of a shared session the user owns and may write into (the shared folders carry no
+    write bits, and the wizard and the detection cache write only where the folder has them)."""
+    import shutil
+
+    shutil.copytree(src, dst)
+    for d, _dirs, files in os.walk(dst):
+        os.chmod(d, 0o755)
+        for f in files:
+            p = Path(d) / f
+            if not p.is_symlink():
+                os.chmod(p, 0o644)
+    return dst

@@ -113,8 +113,9 @@ def test_lepton_zed_calibrates_to_opencvs_figures_and_reports_its_uncertainty(sh
     stereoCalibrate on our ordered corners, 73.4 mm; 69 mm with the one ZED view OpenCV finds
     and we do not). The pairs are hand-held and only
     approximately simultaneous, so the thermal camera's residuals in the joint fit are ~3x its
-    own and its pose is uncertain (~0.9 deg); such a rig is refused naming the camera and the
-    figure, writes nothing, and --accept-uncertain keeps it with the flag."""
+    own; the small board near the image centre leaves the ZED's focal length known to 0.9 % only
+    (projection uncertainty 4.78 px, limit 2.9; docs/calibration.md); such a rig is refused naming
+    the camera and the figure, writes nothing, and --accept-uncertain keeps it with the flag."""
     s = lepton_session(shared_data, tmp_path / "session")
     out = tmp_path / "out"
     out.mkdir()

@@ -114,7 +114,7 @@ def test_fit_rig_subprocess_has_no_traceback(fit_inputs, tmp_path):
     p = subprocess.run([sys.executable, "-c", "import sys; from plantreg_gui.cli import main; sys.exit(main())",
                         "fit-rig", "--rig", str(root / "start.json"), "--landmarks", str(tmp_path / "none.json"),
                         "--out", str(tmp_path / "o.json")], capture_output=True, text=True)
-    assert p.returncode == 1 and "landmarks file not found" in p.stderr and "Traceback" not in p.stderr
+    assert p.returncode == 1 and "landmarks file is missing (not found)" in p.stderr and "Traceback" not in p.stderr
 
 
 # ---------------------------------------------------------------------------- recording create

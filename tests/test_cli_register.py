@@ -197,7 +197,7 @@ def test_os_error_while_writing_is_one_line(tmp_path, capsys, monkeypatch):
     """Disk full / no permission while writing: one line naming the file, exit 1, no folder left."""
     import errno
 
-    from plantreg_gui.core.export import export
+    from plantreg_gui.core.export import tiffs
 
     rig, rec = _write_inputs(tmp_path)
     monkeypatch.setattr(pipeline_mod, "Registrar", _FakeRegistrar)
@@ -205,7 +205,7 @@ def test_os_error_while_writing_is_one_line(tmp_path, capsys, monkeypatch):
     def full(path, *args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
 
-    monkeypatch.setattr(export, "write_tiff_tiled", full)  # the registered TIFFs
+    monkeypatch.setattr(tiffs, "write_tiff_tiled", full)  # the registered TIFFs
     out = tmp_path / "out"
     code = cli.main(_args(rig, rec, out))
     err = capsys.readouterr().err

@@ -142,7 +142,7 @@ def test_early_tiffs_stop_and_clean_up_on_an_error(tmp_path):
             raise RuntimeError("registration failed")
     assert list(tmp_path.iterdir()) == []
     # the stop flag ends a running encoding with Cancelled (the file is not written)
-    from plantreg_gui.core.export.export import _write_registered_tiff
+    from plantreg_gui.core.export.tiffs import write_registered_tiff as _write_registered_tiff
     import threading
 
     stop = threading.Event()

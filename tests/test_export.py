@@ -10,7 +10,7 @@ import pytest
 import tifffile
 from plyfile import PlyData
 
-from plantreg_gui.core.export import export
+from plantreg_gui.core.export import export, tiffs
 from plantreg_gui.core.camera.camera import Camera
 from plantreg_gui.core.display.display import BACKGROUND_RGB
 from plantreg_gui.core.errors import Cancelled, InputError
@@ -287,14 +287,14 @@ def test_registered_tiffs_written_in_the_background_fail_and_finish_cleanly(tmp_
     import time
 
     rig, res = _result()
-    real = export.write_tiff_tiled
+    real = tiffs.write_tiff_tiled
 
     def full(path, *a, **k):
         if "hs" in Path(path).name:
             raise OSError(28, "No space left on device", str(path))
         return real(path, *a, **k)
 
-    monkeypatch.setattr(export, "write_tiff_tiled", full)
+    monkeypatch.setattr(tiffs, "write_tiff_tiled", full)
     out = tmp_path / "out"
     with pytest.raises(OSError) as e:
         write_outputs(res, rig, None, out)
@@ -307,7 +307,7 @@ def test_registered_tiffs_written_in_the_background_fail_and_finish_cleanly(tmp_
     def broken(*a, **k):
         raise OSError("disk full")
 
-    monkeypatch.setattr(export, "write_tiff_tiled", slow)
+    monkeypatch.setattr(tiffs, "write_tiff_tiled", slow)
     monkeypatch.setattr(export, "write_ply", broken)
     with pytest.raises(OSError):
         write_outputs(res, rig, None, out)
@@ -356,7 +356,7 @@ def test_cameras_with_clashing_file_names_are_refused(tmp_path):
     res.registered = {"ir": res.registered["ir"], "thermal_1": res.registered["thermal"],
                       "thermal 1": res.registered["hs"]}
     res.cases = {"thermal_1": res.cases["thermal"], "thermal 1": res.cases["hs"]}
-    with pytest.raises(InputError, match="'thermal_1' and 'thermal 1'|'thermal 1' and 'thermal_1'"):
+    with pytest.raises(InputError, match="same file registered/thermal_1.tif: .*camera 'thermal_1' and .*camera 'thermal 1'"):
         export.write_outputs(res, rig, None, tmp_path / "out")
     assert not (tmp_path / "out").exists()
 
@@ -378,8 +378,8 @@ def test_hit_tiles_answer_every_block_as_the_dense_image(bands, tmp_path):
     idx = np.flatnonzero(blob)
     img = HitImage(idx, dense.reshape(-1, bands)[idx], (H, W, bands) if bands > 1 else (H, W))
     ref = dense if bands > 1 else dense[:, :, 0]
-    tile_of = export._hit_tiles(img)
-    edge = export.tiff_tile_edge(bands, 4)
+    tile_of = tiffs._hit_tiles(img)
+    edge = tiffs.tiff_tile_edge(bands, 4)
     blocks = [(r, min(H, r + edge), c, min(W, c + edge)) for r in range(0, H, edge) for c in range(0, W, edge)]
     blocks += [tuple(sorted(rng.integers(0, H, 2)) + sorted(rng.integers(0, W, 2))) for _ in range(300)]
     for r0, r1, c0, c1 in blocks:
@@ -390,5 +390,5 @@ def test_hit_tiles_answer_every_block_as_the_dense_image(bands, tmp_path):
             assert got is None
         else:
             assert np.array_equal(got, want, equal_nan=True)
-    export._write_registered_tiff(tmp_path / "h.tif", img, "deflate-fp")
+    tiffs.write_registered_tiff(tmp_path / "h.tif", img, "deflate-fp")
     assert np.array_equal(tifffile.imread(tmp_path / "h.tif"), ref, equal_nan=True)

@@ -343,7 +343,7 @@ def test_views_show_colour_bars_and_the_value_under_the_cursor(qtbot, page, demo
     # the overlay is in the depth camera's grid: it reads the infrared
     page.over.hover_scene(QPointF(100.5, 200.5))
     assert page.readout.text().startswith("ir (640x576)  x=100 y=200: ") and \
-        page.readout.text().endswith(f": {float(ir[200, 100]):.0f}")
+        page.readout.text().endswith(f": {float(ir[200, 100]):.0f} DN")  # the rig's units (issue 21)
 
     # a colour camera: no colour bar, three values read out
     page.camera_combo.setCurrentText("rgb")

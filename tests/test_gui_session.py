@@ -97,7 +97,7 @@ def test_spectrum_on_an_unmapped_pixel_says_so(demo_registered):
     unmapped = np.argwhere(~np.isfinite(hs).any(axis=2))
     row, col = (int(v) for v in unmapped[0])
     s.hover("target", row, col)
-    values, _wl, _title = s.spectrum
+    values, _wl, _title, _unit = s.spectrum
     assert not np.isfinite(values).any()  # the plot is told "nothing here", not left stale
 
 
@@ -257,7 +257,7 @@ def test_demo_is_not_remembered_in_open_recent(workspace, demo_registered):
     assert workspace.recent() == []
     assert workspace.default_export_folder().parent == Path.home()
     workspace._loaded(loaded)  # a real recording is remembered
-    assert any(e.startswith("recording:") for e in workspace.recent())
+    assert any(e.startswith("pair:") for e in workspace.recent())  # with its rig: the pair
 
 
 @pytest.mark.gui

@@ -18,6 +18,8 @@ from PySide6.QtCore import QMimeData, QPoint, Qt, QUrl
 from PySide6.QtGui import QDropEvent
 from PySide6.QtWidgets import QMessageBox
 
+from realcal import writable_copy
+
 pytestmark = pytest.mark.gui
 
 WAIT_MS = 600_000  # generous: a loaded 2-core machine detects the demo session slowly
@@ -250,7 +252,7 @@ def test_opencv_stereo_to_saved_rig_tallest_bar_is_engine_worst_view(qtbot, shar
     from plantreg_gui.core.camera.rig import Rig
 
     folder = tmp_path / "stereo"
-    shutil.copytree(shared_data / "opencv-stereo", folder)
+    writable_copy(shared_data / "opencv-stereo", folder)
     w = _wizard(qtbot)
     try:
         assert w.open_session(folder)
@@ -320,7 +322,7 @@ def test_opencv_stereo_classic_detector_makes_pair_02_worst(qtbot, shared_data, 
     from plantreg_gui.core.calibration import Session
 
     folder = tmp_path / "stereo"
-    shutil.copytree(shared_data / "opencv-stereo", folder)
+    writable_copy(shared_data / "opencv-stereo", folder)
     w = _wizard(qtbot)
     try:
         assert w.open_session(folder)
@@ -409,7 +411,7 @@ def test_bad_session_and_failed_calibration_are_dialogs(qtbot, shared_data, tmp_
         for b in _error_dialogs(w):
             b.close()
         folder = tmp_path / "stereo"
-        shutil.copytree(shared_data / "opencv-stereo", folder)
+        writable_copy(shared_data / "opencv-stereo", folder)
         assert w.open_session(folder)
         _idle(qtbot, w)
         w.model.set_excluded_many({(p.name, "right") for p in w.model.session.poses}, True)
@@ -464,7 +466,7 @@ def test_opening_another_session_during_detection(qtbot, demo_dir, shared_data, 
     demo = tmp_path / "demo"
     shutil.copytree(demo_dir / "calibration", demo)
     stereo = tmp_path / "stereo"
-    shutil.copytree(shared_data / "opencv-stereo", stereo)
+    writable_copy(shared_data / "opencv-stereo", stereo)
     w = _wizard(qtbot)
     try:
         assert w.open_session(demo)
@@ -514,7 +516,7 @@ def test_screenshot_of_page_1_does_not_wait_for_detection(qtbot, shared_data, tm
     from plantreg_gui.gui.main_window import MainWindow
 
     folder = tmp_path / "stereo"
-    shutil.copytree(shared_data / "opencv-stereo", folder)
+    writable_copy(shared_data / "opencv-stereo", folder)
     win = MainWindow()
     qtbot.addWidget(win)
     win.resize(1200, 800)

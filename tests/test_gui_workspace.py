@@ -339,7 +339,7 @@ def test_export_proposes_a_folder_beside_the_recording(ws, demo_dir):
 
 def test_recent_files_remember_what_was_opened(ws, demo_dir):
     rec = ws.recent()
-    assert f"recording:{demo_dir / 'recording'}" in rec
+    assert f"pair:{demo_dir / 'rig.json'}|{demo_dir / 'recording'}" in rec  # the pair, reopened together
     assert f"rig:{demo_dir / 'rig.json'}" in rec
 
 
@@ -364,7 +364,7 @@ def test_cancel_registration(ws, qapp):
     assert "cancelled" in ws.readout.text()
 
 
-def test_worker_error_becomes_a_dialog(qapp, demo_dir, tmp_path):
+def test_worker_error_becomes_a_dialog(qapp, demo_dir, tmp_path, monkeypatch):
     from PySide6.QtWidgets import QMessageBox
 
     from plantreg_gui.core.io.imageio import write_tiff
@@ -375,14 +375,20 @@ def test_worker_error_becomes_a_dialog(qapp, demo_dir, tmp_path):
     write_tiff(rec / "thermal.tif", np.zeros((100, 120), np.float32))  # wrong size for the thermal camera
     w = RegistrationWorkspace()
     w.show()
+    asked = []
+    # a recording that does not fit the open rig: the question names the file and the misfit
+    monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: asked.append(a[2]) or QMessageBox.StandardButton.No)
     try:
         w.open_rig(demo_dir / "rig.json")
         w.open_recording(rec)
         _wait(qapp, lambda: not w.is_busy())
-        boxes = [b for b in w.findChildren(QMessageBox) if b.objectName() == "errorDialog" and b.isVisible()]
-        assert len(boxes) == 1
-        assert "120x100" in boxes[0].text() and "thermal" in boxes[0].text() and "thermal.tif" in boxes[0].text()
+        assert len(asked) == 1
+        assert "120x100" in asked[0] and "thermal" in asked[0] and "thermal.tif" in asked[0]
         assert w.recording is None and not w.register_button.isEnabled()
+        w.open_recording(tmp_path / "nowhere")  # a job's error: a dialog naming the folder
+        _wait(qapp, lambda: not w.is_busy())
+        boxes = [b for b in w.findChildren(QMessageBox) if b.objectName() == "errorDialog" and b.isVisible()]
+        assert len(boxes) == 1 and "nowhere" in boxes[0].text()
         boxes[0].close()
     finally:
         w.shutdown()

@@ -327,7 +327,7 @@ def _rig_names_clash_case(rig, rec, root):
 
 def _rig_name_slash(rig, rec, root):
     _rig_edit(rig, lambda d: d["cameras"][1].update(name="../x"))
-    return rig, ["not usable as a file name"]
+    return rig, ["holds '/', a folder separator"]
 
 
 def _rig_t_huge(rig, rec, root):

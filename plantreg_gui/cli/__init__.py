@@ -111,7 +111,48 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     return p
 
 
+class _NamedStdout:
+    """``sys.stdout`` while a command runs: an OS error writing it (``>/dev/full``, a full disk
+    under a redirect) becomes one line naming standard output, instead of an unnamed "No space
+    left on device" (a closed pipe stays a BrokenPipeError: quiet, SIGPIPE's status)."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _guard(self, method: str, *args):
+        try:
+            return getattr(self._stream, method)(*args)
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            raise PlantregError(f"cannot write to standard output ({e.strerror or e}); output files already "
+                                "in place stay") from None
+
+    def write(self, text: str) -> int:
+        return self._guard("write", text)
+
+    def flush(self) -> None:
+        self._guard("flush")
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+def _memory_import_error(e: ImportError) -> str | None:
+    """The one-line message for a library that could not be loaded for lack of address space
+    (``ulimit -v``: the loader says "failed to map segment"), None for other import errors."""
+    text = str(e)
+    if "failed to map segment" in text or "cannot allocate memory" in text.lower():
+        return (f"out of memory: a library could not be loaded ({text}); the address-space limit "
+                "(ulimit -v) is too low for plantreg")
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
+    if sys.stdout is None:  # started with stdout closed (>&-): results could not be printed
+        print("plantreg: error: standard output is closed; plantreg prints its results there (send them to "
+              "/dev/null instead: >/dev/null)", file=sys.stderr)
+        return 1
     parser = build_parser(list(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     # the words of this command line, for provenance (sys.argv is someone else's when called in-process)
@@ -119,7 +160,13 @@ def main(argv: list[str] | None = None) -> int:
     # SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGALRM, SIGXCPU ... unwind like Ctrl-C (core/signals.py)
     old_handlers = signals.install()
     try:
-        return int(args.run(args) or 0)
+        stdout, sys.stdout = sys.stdout, _NamedStdout(sys.stdout)
+        try:
+            rc = int(args.run(args) or 0)
+            sys.stdout.flush()
+        finally:
+            sys.stdout = stdout
+        return rc
     except Terminated as e:
         print(f"plantreg: terminated by {signal.Signals(e.signum).name}; temporary outputs removed", file=sys.stderr)
         return 128 + e.signum
@@ -134,6 +181,11 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except MemoryError:
         print("plantreg: error: out of memory", file=sys.stderr)
+        return 1
+    except ImportError as e:
+        if _memory_import_error(e) is None:
+            raise
+        print(f"plantreg: error: {_memory_import_error(e)}", file=sys.stderr)
         return 1
     except BrokenPipeError:
         # whoever read our output went away (`plantreg ... | head`): stop quietly with SIGPIPE's
@@ -171,8 +223,9 @@ def entry() -> None:
         sys.exit(rc)  # the interpreter waits for such threads
     atexit._run_exitfuncs()  # CPython's own call at exit; it clears them, so they never run twice
     try:
-        sys.stdout.flush()
-        sys.stderr.flush()
+        for stream in (sys.stdout, sys.stderr):
+            if stream is not None:  # None: started with the stream closed
+                stream.flush()
     except (OSError, ValueError):
         sys.exit(rc)
     os._exit(rc)

@@ -88,21 +88,20 @@ class _Progress:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..core.io.paths import check_output_location
     from ..core.pipeline import batch, batch_guard
-    from ..core.export.export import check_output_spares_inputs
     from .register_cmd import load_rig_for_target, output_options, registration_params
 
     rig_path = args.rig.absolute()
-    load_rig_for_target(rig_path, args.target)  # refuses a bad rig before any work
     options = output_options(args)
+    load_rig_for_target(rig_path, args.target, options.parts)  # refuses a bad rig before any work
     params = registration_params(args)
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be at least 1, got {args.workers}")
     out = args.out.absolute()
-    if out.exists() and not out.is_dir():
-        raise InputError("output path exists and is not a folder", out)
     jobs = batch.plan(batch.expand_inputs(args.recordings), out)  # name clashes: refused before any work
-    check_output_spares_inputs(out, [rig_path] + [Path(j.recording) for j in jobs])
+    # OUT is written into (one folder per recording), never replaced as a whole
+    check_output_location(out, "output", folder=True, into=True, inputs=[rig_path] + [j.recording for j in jobs])
     if args.scheduler:  # before OUT exists: a wrong address leaves nothing behind
         batch_guard.check_scheduler(args.scheduler)
     made = not os.path.lexists(out)

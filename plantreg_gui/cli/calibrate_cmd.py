@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     from ..core.calibration.calibrate import MAX_RMS_PX, quality_problems
     from ..core.calibration.metrics import empty_depth_maps
     from ..core.calibration.report import calibrated_rig, report_files, run_session, write_calibration
-    from ..core.io.imageio import check_output_location
+    from ..core.io.paths import check_output_location
     from ..core.progress import Reporter
 
     session = Session.load(args.session)
@@ -126,8 +126,7 @@ def run(args: argparse.Namespace) -> int:
         roi = (lo, hi)
     # every output, checked before the long work: free (or --overwrite), writable, no input among
     # them, and no two of them the same file (--out X/r_intrinsic.csv --report X/r.json)
-    inputs = [session.folder, session.path] + [f for pose in session.poses
-                                               for f in [*pose.images.values(), *([pose.depth] if pose.depth else [])]]
+    inputs = session.inputs()
     outputs = {args.out.absolute(): "--out"}
     for f in report_files(args.report):
         if f.absolute() in outputs:
@@ -225,6 +224,10 @@ def _print_summary(session, detections, cal, report) -> None:
             if u.rotation_deg is not None:
                 line += f"; pose vs {cal.reference}: +- {u.rotation_deg:.3f} deg, +- {u.translation_mm:.2f} mm"
             print(line)
+            if u.sigma_boards is not None:
+                far = ", ".join(f"{'far' if f >= 100 else f'{f:g}x'} {v:.2f}" for f, v in u.boards_by_distance.items())
+                print(f"  {'':14s} among the boards (mrcal): median {float(np.median(u.sigma_boards)):.2f} px"
+                      + (f"; at other distances: {far}" if far else ""))
     if cal.flipped:
         print(f"symmetric board: corner order of {len(cal.flipped)} view(s) turned by 180 degrees to agree with the rig")
     cams = list(session.cameras)

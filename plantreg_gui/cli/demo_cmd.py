@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 
-from ..core.errors import InputError
 from . import StderrProgress
 
 
@@ -38,11 +36,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..core.synthetic import write_demo
 
-    from ..core.io.imageio import check_output_location
+    from ..core.io.paths import check_output_location
 
     d = args.dir
-    if os.path.lexists(d) and not d.is_dir():  # --overwrite replaces folders, never a file
-        raise InputError("exists and is not a folder; choose another folder name", d)
     check_output_location(d, "demo folder", folder=True, overwrite=args.overwrite)
     t0 = time.perf_counter()
     paths = write_demo(args.dir, size=args.size, seed=args.seed, progress=StderrProgress(args.quiet),

@@ -31,7 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--rig", required=True, type=Path, metavar="START", help="start rig (plantreg.rig JSON)")
     p.add_argument("--landmarks", required=True, type=Path, metavar="LANDMARKS.json",
                    help="landmarks file (plantreg.landmarks JSON; recording paths relative to it)")
-    p.add_argument("--out", required=True, type=Path, metavar="RIG", help="fitted rig file to write")
+    from . import nonempty_path
+
+    p.add_argument("--out", required=True, type=nonempty_path, metavar="RIG", help="fitted rig file to write")
     p.add_argument("--free", default="", metavar="ITEMS",
                    help="intrinsics to fit: comma-separated focal, principal, k1 (every camera, the depth camera "
                         "included) or CAMERA:ITEM for one camera, e.g. 'focal,ir:k1,ir:principal'")
@@ -62,19 +64,13 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def check_output_rig(out: Path, overwrite: bool, inputs: dict[str, Path] | None = None) -> None:
-    """Refuse an output rig path before any work (``fit-rig``, ``rig create``): an existing file
-    without ``overwrite``, one of the command's ``inputs`` (what -> path), a folder, a missing
-    folder. The rig is then written atomically by :meth:`Rig.save`."""
-    if out.exists() and not overwrite:
-        raise InputError("output rig file exists (choose another, or pass --overwrite)", out)
-    for what, p in (inputs or {}).items():
-        if out.exists() and p.exists() and out.resolve() == p.resolve():
-            raise InputError(f"--out is {what}; write the rig elsewhere", out)
-    if out.is_dir():
-        raise InputError("output path is a folder, not a file", out)
-    if not out.absolute().parent.is_dir():
-        raise InputError("the folder for the output rig does not exist", out.absolute().parent)
+def check_output_rig(out: Path, overwrite: bool, inputs: list[Path] | None = None) -> None:
+    """Refuse an output rig path before any work (``fit-rig``, ``rig create``): the one output
+    check (:func:`~..core.io.paths.check_output_location`; docs/errors.md, "Paths, names and
+    outputs") with the command's ``inputs``. The rig is then written atomically by :meth:`Rig.save`."""
+    from ..core.io.paths import check_output_location
+
+    check_output_location(out, "output rig", overwrite=overwrite, inputs=list(inputs or []))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -82,10 +78,10 @@ def run(args: argparse.Namespace) -> int:
     from ..core.data.landmarks import LandmarkSet
     from ..core.camera.rig import Rig
     from ..core.camera.record import landmark_record
+    from ..core.data.recording import recording_inputs
     from ..core.rigfit.rigfit import fit_rig_from_file, format_report, keep_not_worse, parse_free, parse_priors
 
     out: Path = args.out
-    check_output_rig(out, args.overwrite, {"the landmarks file": Path(args.landmarks)})
     if args.recording and not (args.refine or args.silhouette):
         raise InputError("--recording adds recordings for --refine or --silhouette; pass one of them too")
     free = parse_free(args.free)
@@ -101,6 +97,10 @@ def run(args: argparse.Namespace) -> int:
     except InputError as e:
         raise InputError(f"{e.detail}; a landmark fit needs the depth camera", args.rig) from None
     landmarks = LandmarkSet.load(args.landmarks)
+    # the output, before the fit: never the start rig, the landmarks or a file of their recordings
+    reads = [f for key in landmarks.recordings for f in recording_inputs(landmarks.folder(key))]
+    reads += [f for folder in args.recording for f in recording_inputs(folder)]
+    check_output_rig(out, args.overwrite, [args.rig, args.landmarks, *reads])
     if landmarks.count() > 0:
         result = fit_rig_from_file(rig, landmarks, free=free, priors=priors, cameras=fit_cams,
                                    max_median_px=args.max_median, snap_depth=not args.no_snap_depth)
@@ -158,10 +158,12 @@ def _recordings(args: argparse.Namespace, landmarks, rig) -> tuple[list, dict]:
     relative paths)."""
     from ..core.data.recording import Recording
 
-    folders = [landmarks.folder(k).resolve() for k in landmarks.recordings]
-    folders += [f.resolve() for f in args.recording if f.resolve() not in folders]
+    from ..core.io.paths import resolve
+
+    folders = [resolve(landmarks.folder(k), "recording folder") for k in landmarks.recordings]
+    folders += [f for f in (resolve(d, "--recording") for d in args.recording) if f not in folders]
     recordings = [Recording.load(f, rig) for f in folders]
-    by_folder = {str(landmarks.folder(k).resolve()): pts for k, pts in landmarks.recordings.items()}
+    by_folder = {str(resolve(landmarks.folder(k))): pts for k, pts in landmarks.recordings.items()}
     return recordings, by_folder
 
 

@@ -20,14 +20,16 @@ from ..core.errors import InputError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    from . import nonempty_path
+
     p = sub.add_parser("recording", help="make recording folders (recording.json) for existing files",
                        description="Recording folders: a recording.json naming a depth map and one image per camera.")
     rs = p.add_subparsers(dest="recording_command", metavar="ACTION", required=True)
     c = rs.add_parser("create", help="write DIR/recording.json pointing at existing files",
                       description="Write DIR/recording.json pointing at existing files (paths stored relative to "
                       "DIR; nothing is copied). Every file must be a readable image.")
-    c.add_argument("dir", type=Path, metavar="DIR", help="recording folder (made if missing)")
-    c.add_argument("--depth", type=Path, metavar="FILE", help="depth map of the rig's depth camera")
+    c.add_argument("dir", type=nonempty_path, metavar="DIR", help="recording folder (made if missing)")
+    c.add_argument("--depth", type=nonempty_path, metavar="FILE", help="depth map of the rig's depth camera")
     c.add_argument("--depth-scale", type=float, metavar="S",
                    help="metres per depth unit of this recording (default: the rig's depth.scale)")
     c.add_argument("--image", action="append", default=[], metavar="NAME=FILE",
@@ -39,14 +41,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run_create(args: argparse.Namespace) -> int:
     from ..core.io.imageio import atomic_write_text, read_image
-    from ..core.data.recording import MANIFEST
+    from ..core.io.paths import check_output_location
+    from ..core.data.recording import MANIFEST, manifest_entries
 
     folder: Path = args.dir
     manifest = folder / MANIFEST
-    if folder.exists() and not folder.is_dir():
-        raise InputError("recording folder is a file, not a folder", folder)
-    if manifest.exists() and not args.overwrite:
-        raise InputError(f"{MANIFEST} exists (pass --overwrite to replace it)", manifest)
     if args.depth is None and not args.image:
         raise InputError("give --depth FILE and/or --image NAME=FILE")
     if args.depth_scale is not None and not (args.depth_scale > 0 and math.isfinite(args.depth_scale)):
@@ -54,7 +53,6 @@ def run_create(args: argparse.Namespace) -> int:
     images: dict[str, Path] = {}
     for item in args.image:
         name, sep, f = item.partition("=")
-        name = name.strip()
         if not sep or not name or not f:
             raise InputError(f"--image takes NAME=FILE, got '{item}'")
         if name == "depth":
@@ -62,20 +60,27 @@ def run_create(args: argparse.Namespace) -> int:
         if name in images:
             raise InputError(f"camera '{name}' is given twice with --image")
         images[name] = Path(f)
+    m: dict[str, object] = {}
+    if args.depth is not None:
+        m["depth"] = _rel(args.depth, folder)
+        if args.depth_scale is not None:
+            m["depth_scale"] = args.depth_scale
+    m["images"] = {name: _rel(f, folder) for name, f in images.items()}
+    # the manifest as register will read it: its camera names under the one rule (core/validate.py)
+    manifest_entries(m, manifest)
+    if os.path.lexists(folder) and not folder.is_dir():
+        raise InputError("recording folder is a file, not a folder", folder)
+    inputs = [*images.values(), *([args.depth] if args.depth is not None else [])]
+    check_output_location(manifest, MANIFEST, overwrite=args.overwrite, inputs=inputs)
     # read every file now: a recording that cannot be read later is no use
     for name, f in images.items():
         read_image(f)
-    m: dict[str, object] = {}
     if args.depth is not None:
         d = read_image(args.depth)
         if d.ndim != 2:
             raise InputError(f"depth map must be single-channel, got shape {d.shape}", args.depth)
         if d.dtype.kind not in "uif":
             raise InputError(f"depth map must hold numbers, got dtype {d.dtype}", args.depth)
-        m["depth"] = _rel(args.depth, folder)
-        if args.depth_scale is not None:
-            m["depth_scale"] = args.depth_scale
-    m["images"] = {name: _rel(f, folder) for name, f in images.items()}
     folder.mkdir(parents=True, exist_ok=True)
     atomic_write_text(manifest, json.dumps(m, indent=2) + "\n")
     print(f"wrote {manifest}: " + ", ".join((["depth"] if "depth" in m else []) + list(images)))

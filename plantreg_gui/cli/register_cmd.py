@@ -94,9 +94,11 @@ def add_registration_options(p: argparse.ArgumentParser) -> None:
                           "camera's blur_px (default 1)")
 
 
-def load_rig_for_target(rig_path: Path, target: str):
-    """The rig at ``rig_path``, checked to have a depth camera and a camera ``target``."""
+def load_rig_for_target(rig_path: Path, target: str, parts: tuple[str, ...] | None = None):
+    """The rig at ``rig_path``, checked to have a depth camera and a camera ``target``, and
+    camera names whose output ``parts`` (None = all) are distinct files."""
     from ..core.camera.rig import Rig
+    from ..core.export.export import check_output_names
 
     rig = Rig.load(rig_path)
     # the rig's own errors do not know its file name: add it
@@ -106,6 +108,10 @@ def load_rig_for_target(rig_path: Path, target: str):
         raise InputError(f"{e.detail}; registration needs a depth camera", rig_path) from None
     if target not in rig.names:
         raise InputError(f"unknown target camera '{target}'; the rig has {', '.join(rig.names)}", rig_path)
+    try:
+        check_output_names(rig.names, parts)
+    except InputError as e:
+        raise InputError(e.detail, rig_path) from None
     return rig
 
 
@@ -136,23 +142,24 @@ def registration_params(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from .. import cli
-    from ..core.export.export import check_output_spares_inputs
-    from ..core.io.imageio import check_output_location
+    from ..core.data.recording import recording_inputs
+    from ..core.io.paths import check_output_location, resolve
     from ..core.pipeline.pipeline import register_recording
     from ..core.registration.cases import Area, Case
 
     rig_path: Path = args.rig
     out: Path = args.out
-    rig = load_rig_for_target(rig_path, args.target)
     options = output_options(args)
+    rig = load_rig_for_target(rig_path, args.target, options.parts)
     params = registration_params(args)
     # fail before the long work, not after it: the output location (free or --overwrite, not an
     # input, writable), then the recording (names, then every image's header and size)
-    check_output_spares_inputs(out, [rig_path, args.recording])
-    check_output_location(out, "output", folder=True, overwrite=args.overwrite, inputs=[rig_path, args.recording])
+    recording = resolve(args.recording, "recording folder")
+    check_output_location(out, "output", folder=True, overwrite=args.overwrite,
+                          inputs=[rig_path, *recording_inputs(recording)])
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
     result = register_recording(rig, args.recording, args.target, out, params, options, overwrite=args.overwrite,
-                                inputs={"rig": rig_path.resolve(), "recording": Path(args.recording).resolve(),
+                                inputs={"rig": rig_path.resolve(), "recording": recording,
                                         "command": _command_line(args)}, progress=progress).result
 
     H, W = result.shape

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from ..core.errors import InputError
 
@@ -26,7 +25,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         description="Write a start rig (plantreg.rig JSON) for plantreg fit-rig from camera models: size, a "
         "lens (data sheet field of view, a focal length in pixels, or the Azure Kinect's factory calibration), "
         "how each image is turned against the depth camera's and a rough position.")
-    c.add_argument("out", type=Path, metavar="OUT", help="rig file to write")
+    from . import nonempty_path
+
+    c.add_argument("out", type=nonempty_path, metavar="OUT", help="rig file to write")
     c.add_argument("--depth-camera", required=True, metavar="NAME", help="the camera the depth maps belong to")
     c.add_argument("--camera", action="append", required=True, default=[], metavar="SPEC",
                    help="NAME=MODALITY,WxH,LENS,rot=0|90|180|270[,at=X,Y,Z] with LENS hfov=DEG[,vfov=DEG] | "
@@ -46,8 +47,7 @@ def run_create(args: argparse.Namespace) -> int:
     from .fit_rig_cmd import check_output_rig
 
     specs = [parse_camera_spec(t) for t in args.camera]
-    check_output_rig(args.out, args.overwrite, {f"camera {s.name}'s calibration": s.kinect for s in specs
-                                                if s.kinect is not None})
+    check_output_rig(args.out, args.overwrite, [s.kinect for s in specs if s.kinect is not None])
     roi = None
     if args.roi is not None:
         try:

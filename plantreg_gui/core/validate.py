@@ -24,10 +24,8 @@ with it would give one value for every pixel, or none):
 * ``t``: at most :data:`MAX_TRANSLATION_M` metres from the depth camera (a phenotyping rig fits
   in a room; 1e308 overflows every computation).
 
-Camera names: non-empty strings of at most :data:`MAX_NAME_LEN` characters, no control
-characters, no ``/``, ``\\`` or ``:``, not ``.`` or ``..``, no leading or trailing spaces, and unique
-ignoring case and the characters outputs replace by ``_`` (``ir`` and ``IR`` would write the same
-files on a case-insensitive file system).
+Camera names: the one rule of :func:`camera_name` and :func:`unique_names` (docs/errors.md,
+"Camera names").
 """
 
 from __future__ import annotations
@@ -113,7 +111,20 @@ def number_array(v: Any, key: str, shape: tuple[int, ...] | None = None, what: s
 
 
 # ---------------------------------------------------------------------- camera names
-_BAD_NAME = re.compile(r"[\x00-\x1f\x7f/\\:]")
+#: Characters no camera name may hold, and why: a camera's name becomes part of its output files'
+#: names (``cases/<name>.png``), of PLY property names and of command lines.
+FORBIDDEN_NAME_CHARS = {
+    "/": "a folder separator", "\\": "a folder separator on Windows",
+    ":": "a drive separator on Windows (and shown as '/' by macOS)",
+    "*": "a wildcard (a shell would expand cases/*.png-like names to other cameras' files; Windows file "
+         "names cannot hold it)",
+    "?": "a wildcard (a shell would expand it to other cameras' files; Windows file names cannot hold it)",
+    '"': "a quote Windows file names cannot hold", "<": "a shell redirection Windows file names cannot hold",
+    ">": "a shell redirection Windows file names cannot hold", "|": "a shell pipe Windows file names cannot hold",
+}
+#: Names Windows reserves for devices (``cases/CON.png`` cannot be made or copied there).
+WINDOWS_DEVICE_NAMES = {"CON", "PRN", "AUX", "NUL", *(f"COM{i}" for i in range(1, 10)), *(f"LPT{i}" for i in range(1, 10))}
+_RULE = "camera names are 1 to 64 ASCII characters without / \\ : * ? \" < > |"
 
 
 def file_stem(name: str) -> str:
@@ -123,26 +134,54 @@ def file_stem(name: str) -> str:
 
 
 def camera_name(v: Any, key: str) -> str:
+    """The one camera-name rule (rig, calibration session, recording, outputs): a string of 1 to
+    :data:`MAX_NAME_LEN` printable ASCII characters without :data:`FORBIDDEN_NAME_CHARS`, not
+    starting with ``.`` (hidden output files) or ``-`` (read as an option: ``--target -x``), no
+    leading or trailing space. Non-ASCII is refused: outputs spell such letters as ``_``, and one
+    letter has two Unicode spellings that look the same (``ä`` precomposed, or ``a`` + combining
+    diaeresis), so two names could look equal and differ, or differ only on another system."""
     if not isinstance(v, str):
         raise ValueError(f"{key} must be a string (the camera's name), got {show(v)}")
     if not v:
         raise ValueError(f"{key} must not be empty")
     if len(v) > MAX_NAME_LEN:
-        raise ValueError(f"{key} is longer than {MAX_NAME_LEN} characters")
-    if _BAD_NAME.search(v) or v in (".", "..") or v != v.strip():
-        raise ValueError(f"{key} {show(v)} is not usable as a file name (no control characters, '/', '\\', "
-                         "':', leading or trailing spaces, and not '.' or '..')")
+        raise ValueError(f"{key} {show(v, 24)} is {len(v)} characters long; {_RULE}")
+    bad = next((c for c in v if not " " <= c <= "~" or c in FORBIDDEN_NAME_CHARS), None)
+    if bad is not None:
+        if bad in FORBIDDEN_NAME_CHARS:
+            why = f"holds {bad!r}, {FORBIDDEN_NAME_CHARS[bad]}"
+        elif ord(bad) < 32 or ord(bad) == 127:
+            why = f"holds the control character U+{ord(bad):04X}"
+        else:
+            why = (f"holds the non-ASCII character {bad!r} (U+{ord(bad):04X}): output file and PLY property names "
+                   "would spell it '_', and one letter has several Unicode spellings that look the same")
+        raise ValueError(f"{key} {show(v)} {why}; {_RULE}")
+    if file_stem(v).split(".")[0].upper() in WINDOWS_DEVICE_NAMES:
+        raise ValueError(f"{key} {show(v)} is a device name Windows reserves (its output files, e.g. "
+                         f"cases/{file_stem(v)}.png, could not be copied there); {_RULE}")
+    if v in (".", "..") or v[0] in ".-" or v != v.strip():
+        why = ("starts with '.' (its output files would be hidden)" if v[0] == "." else
+               "starts with '-' (it would be read as an option on the command line)" if v[0] == "-" else
+               "has a leading or trailing space")
+        raise ValueError(f"{key} {show(v)} {why}; {_RULE}")
     return v
 
 
 def unique_names(names: list[str], key: str = "cameras") -> None:
-    """Camera names must differ also ignoring case and the characters outputs replace."""
+    """Camera names must differ also ignoring case and the characters outputs replace by ``_``."""
     seen: dict[str, str] = {}
     for n in names:
         k = file_stem(n).lower()
         if k in seen:
             other = seen[k]
-            why = "repeated" if other == n else "the same file name on a case-insensitive file system"
+            if other == n:
+                why = "repeated"
+            elif other.lower() == n.lower():
+                why = ("they differ only in case: their output files would be one file on the case-insensitive file "
+                       "systems of Windows and macOS")
+            else:
+                why = f"output file names spell both '{file_stem(n)}' (characters other than letters, digits, " \
+                      "'_', '-' and '.' become '_')"
             raise ValueError(f"{key}: names {show(other)} and {show(n)} clash ({why}); camera names must be unique")
         seen[k] = n
 

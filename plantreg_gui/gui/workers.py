@@ -85,6 +85,13 @@ class Worker(QObject):
     def cancel(self) -> None:
         self.token.cancel()
 
+    #: cancelled because a newer job replaced it: runners report no "cancelled" for it
+    superseded = False
+
+    def supersede(self) -> None:
+        self.superseded = True
+        self.token.cancel()
+
     def is_running(self) -> bool:
         return self._running
 
@@ -180,7 +187,7 @@ class Jobs:
         else:
             w.failed.connect(lambda msg, det, t=error_title or f"{title} failed": show_error(self.parent, t, msg, det))
         if self.on_cancelled is not None and not background:
-            w.cancelled.connect(lambda t=title: self.on_cancelled(t))
+            w.cancelled.connect(lambda t=title, w=w: None if w.superseded else self.on_cancelled(t))
         end = on_end or self.on_end
         w.done.connect(lambda w=w: self._done(w, end))
         w.start()

@@ -393,7 +393,9 @@ class LandmarkSession:
         def job(progress: Reporter | None = None) -> FitResult:
             if progress is not None:
                 progress(0.0, "fitting the rig to the landmarks")
-            return fit_rig(rig, recs, free=free, loo=False)
+            # leave-one-recording-out when there are two recordings (the report's LOO median); not the
+            # per-landmark refits of a single recording, which would hold the page's fit up
+            return fit_rig(rig, recs, free=free, loo=len(recs) >= 2)
 
         return job
 

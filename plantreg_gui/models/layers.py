@@ -63,21 +63,31 @@ def pca_basis(raw: np.ndarray, modality: str, settings: DisplaySettings | None =
     return display.fit_pca(raw, None, (settings or DisplaySettings()).percentiles)
 
 
-def unit_of(modality: str) -> str:
+#: spellings of a rig's ``units`` -> the unit as shown
+_UNIT_SPELLINGS = {"degc": "°C", "°c": "°C", "celsius": "°C", "c": "°C", "k": "K", "kelvin": "K",
+                   "mm": "mm", "millimetre": "mm", "millimeter": "mm"}
+
+
+def unit_of(modality: str, cam: Any = None) -> str:
+    """The unit of a camera's values: the rig's ``units`` when it states them (a thermal camera
+    in kelvin is K, not °C), else the modality's."""
+    u = (getattr(cam, "extra", None) or {}).get("units") if cam is not None else None
+    if isinstance(u, str) and u.strip():
+        return _UNIT_SPELLINGS.get(u.strip().lower(), u.strip())
     return _mod.unit(modality)
 
 
-def format_value(v: float, modality: str) -> str:
+def format_value(v: float, modality: str, unit: str | None = None) -> str:
+    """A value with its unit (``unit`` None: the modality's)."""
     if not np.isfinite(v):
         return "—"
-    unit = _mod.unit(modality)
-    if unit == "°C":
-        return f"{v:.2f} °C"
+    unit = _mod.unit(modality) if unit is None else unit
+    if unit in ("°C", "K"):
+        return f"{v:.2f} {unit}"
     if unit == "mm":
         return f"{v:.1f} mm"
-    if abs(v) >= 1000 or float(v).is_integer():
-        return f"{v:.0f}"
-    return f"{v:.4g}"
+    num = f"{v:.0f}" if abs(v) >= 1000 or float(v).is_integer() else f"{v:.4g}"
+    return f"{num} {unit}" if unit else num
 
 
 @dataclass
@@ -115,21 +125,43 @@ class Layer:
             cache[key] = tuple(float(v) for v in display.auto_limits(self.data, percentiles))
         return cache[key]
 
+    #: at most this many values enter a histogram (a strided sample of a larger image)
+    HIST_SAMPLE = 1 << 18
+
+    def histogram(self, bins: int = 64) -> tuple[np.ndarray, np.ndarray] | None:
+        """(counts (bins,), edges (bins + 1,)) of a single-band layer's finite values (depth:
+        values > 0), over a strided sample of at most :attr:`HIST_SAMPLE` pixels; None for
+        colour and multi-band images or no finite value. Cached per layer."""
+        if self.data.ndim != 2:
+            return None
+        cache = self.__dict__.setdefault("_hist", {})
+        key = (id(self.data), bins)
+        if key not in cache:
+            flat = self.data.reshape(-1)
+            step = max(1, flat.size // self.HIST_SAMPLE)
+            v = np.asarray(flat[::step], dtype=np.float64)
+            v = v[np.isfinite(v)]
+            if _mod.get(self.modality).zero_is_missing:
+                v = v[v > 0]
+            cache[key] = None if v.size == 0 else np.histogram(v, bins=bins)
+        return cache[key]
+
     def value_text(self, row: int, col: int, band: int | None = None) -> str:
         h, w = self.data.shape[:2]
         if not (0 <= row < h and 0 <= col < w):
             return "—"
         px = self.data[row, col]
         if self.data.ndim == 2:
-            return format_value(float(px), self.modality)
+            return format_value(float(px), self.modality, self.unit)
         if display.shows_as_rgb(self.bands, self.modality):  # drawn as RGB (a 3-band cube too): its values
             if not np.all(np.isfinite(px.astype(np.float64))):
                 return "—"
-            return "(" + ", ".join(format_value(float(v), self.modality) for v in px) + ")"
+            vals = "(" + ", ".join(format_value(float(v), self.modality, "") for v in px) + ")"
+            return f"{vals} {self.unit}" if self.unit else vals  # the unit once, not per channel
         b = 0 if band is None else int(np.clip(band, 0, self.bands - 1))
         v = float(px[b])
         where = f"{self.wavelengths[b]:.0f} nm" if self.wavelengths is not None else f"band {b}"
-        return f"{format_value(v, self.modality)} @ {where} ({self.bands} bands)"
+        return f"{format_value(v, self.modality, self.unit)} @ {where} ({self.bands} bands)"
 
     def spectrum(self, row: int, col: int) -> np.ndarray | None:
         """(B,) values of a cube at a pixel, None for images with at most 3 bands."""
@@ -176,7 +208,7 @@ def registered_layers(result: Any, rig: Any) -> list[Layer]:
         data = result.registered[name]
         mod = cam.modality if cam is not None else name
         layers.append(Layer(name, mod, data, wavelengths_of(cam, data.shape[2]) if data.ndim == 3 else None,
-                            unit_of(mod)))
+                            unit_of(mod, cam)))
     z_mm = np.asarray(result.points_rig[..., 2], dtype=np.float32) * np.float32(1000.0)
     layers.append(Layer(DEPTH, DEPTH, z_mm, None, "mm"))
     return layers
@@ -195,7 +227,7 @@ def raw_layers(rig: Any | None, recording: Any) -> list[Layer]:
             cam = rig.camera(name)
         mod = cam.modality if cam is not None else _guess_modality(name, img)
         wl = wavelengths_of(cam, img.shape[2]) if (cam is not None and img.ndim == 3) else None
-        layers.append(Layer(name, mod, img, wl, unit_of(mod)))
+        layers.append(Layer(name, mod, img, wl, unit_of(mod, cam)))
     return layers
 
 
@@ -215,13 +247,14 @@ class Cloud:
     colours: dict[str, np.ndarray] = field(default_factory=dict)
     values: dict[str, np.ndarray] = field(default_factory=dict)
     modalities: dict[str, str] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)      # name -> unit (the layer's); else the modality's
 
     def point_text(self, i: int) -> str:
         p = self.points[i]
         lines = [f"point {i}: x={p[0]*1000:.1f} y={p[1]*1000:.1f} z={p[2]*1000:.1f} mm (rig frame)"]
         for name, v in self.values.items():
             if v.ndim == 1:
-                lines.append(f"{name}: {format_value(float(v[i]), self.modalities.get(name, name))}")
+                lines.append(f"{name}: {format_value(float(v[i]), self.modalities.get(name, name), self.units.get(name))}")
             elif v.shape[1] == 3:
                 lines.append(f"{name}: (" + ", ".join(f"{float(x):.4g}" for x in v[i]) + ")")
             else:
@@ -240,6 +273,7 @@ def build_cloud(points_hw3: np.ndarray, layers: list[Layer], renders: dict[str, 
         v = L.data.reshape(L.data.shape[0] * L.data.shape[1], -1)[pix]
         cloud.values[L.name] = v[:, 0] if v.shape[1] == 1 else v
         cloud.modalities[L.name] = L.modality
+        cloud.units[L.name] = L.unit
         if L.name in renders:
             cloud.colours[L.name] = np.ascontiguousarray(renders[L.name].reshape(-1, 3)[pix])
     return cloud

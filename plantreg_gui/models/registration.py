@@ -44,18 +44,50 @@ from .layers import (
 
 
 # ---------------------------------------------------------------------- paths
+#: first bytes of image files someone may pick as a rig by mistake -> what they are
+_IMAGE_MAGIC = ((b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"II*\x00", "a TIFF image"),
+                (b"MM\x00*", "a TIFF image"), (b"\x93NUMPY", "a NumPy array (.npy)"))
+#: "format" of the project's other JSON files -> what they are and where they belong
+_OTHER_FORMATS = {"plantreg.landmarks": "a landmarks file (open it in the Landmarks tab)",
+                  "plantreg.calibration-report": "a calibration report"}
+_RIG_IS = "a rig file is a .json listing the cameras with their intrinsics and extrinsics"
+
+
 def check_is_rig_file(path: Path) -> None:
-    """Refuse a JSON file that is plainly something else (a recording manifest, a session, any JSON)
-    with "not a rig file" rather than a complaint about its missing cameras."""
+    """Refuse a file that is plainly something else (an image, an empty file, a recording
+    manifest, a calibration session, any other JSON) with one line saying what it is, rather than
+    a parser's complaint ("Expecting value", "invalid start byte", "the rig has no cameras")."""
     import json
 
     if not path.is_file():
         return  # Rig.load names the missing file
     try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
+        with open(path, "rb") as f:
+            head = f.read(1 << 20)
+    except OSError:
         return  # Rig.load explains unreadable files
-    if isinstance(d, dict) and "cameras" not in d and d.get("format") != "plantreg.rig":
+    for magic, what in _IMAGE_MAGIC:
+        if head.startswith(magic):
+            raise InputError(f"not a rig file ({what}); {_RIG_IS}", path)
+    if not head.strip():
+        raise InputError(f"not a rig file (the file is empty); {_RIG_IS}", path)
+    try:
+        d = json.loads(head.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise InputError(f"not a rig file (binary data, not JSON text); {_RIG_IS}", path) from None
+    except ValueError as e:
+        if len(head) == 1 << 20:
+            return  # a long file: Rig.load reads and explains it whole
+        raise InputError(f"not a rig file (not valid JSON: {getattr(e, 'msg', e)} at line "
+                         f"{getattr(e, 'lineno', '?')}); {_RIG_IS}", path) from None
+    if not isinstance(d, dict):
+        return  # Rig.load says the top level must be an object
+    if d.get("format") in _OTHER_FORMATS:
+        raise InputError(f"not a rig file ({_OTHER_FORMATS[d['format']]}); {_RIG_IS}", path)
+    if "board" in d and isinstance(d.get("cameras"), dict):
+        raise InputError("not a rig file (a calibration session: open its folder in the Calibration tab, "
+                         "whose last page saves the rig)", path)
+    if "cameras" not in d and d.get("format") != "plantreg.rig":
         what = "a recording manifest" if path.name == MANIFEST else "a JSON file without \"cameras\""
         raise InputError(f"not a rig file ({what}); a rig file lists the cameras with their intrinsics and "
                          "extrinsics", path)
@@ -105,18 +137,65 @@ def raw_pca(rec: Recording, rig: Rig | None, settings: dict[str, DisplaySettings
     return out
 
 
+def rig_beside(rec_path: Path) -> Path | None:
+    """The ``rig.json`` that goes with a recording folder: in it, or in the folder above (the
+    demo's layout), or None."""
+    for cand in (rec_path / "rig.json", rec_path.parent / "rig.json"):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def recording_for_plant(rig_path: Path | None, plant: str) -> Path | None:
+    """The recording folder of a Plant3DImageReg ``plant`` that ships with a rig:
+    ``<rig folder>/recordings/<plant>`` (resources/plant3dimagereg's layout), or None. Opening the
+    data set's own plant folder shows the raw images only; this recording is what registers."""
+    if rig_path is None:
+        return None
+    rec = Path(rig_path).parent / "recordings" / plant
+    return rec if (rec / MANIFEST).is_file() else None
+
+
+def fit_problem(rig: Rig, rec: Recording) -> str | None:
+    """Why ``rec`` does not fit ``rig`` (Recording.check's message with its file), or None."""
+    try:
+        rec.check(rig)
+    except InputError as e:
+        return str(e)
+    return None
+
+
 def load_job(rig_path: Path | None, rec_path: Path, rig: Rig | None, settings, progress) -> dict:
-    """Read a recording (and its rig when given by path) and render its raw images."""
+    """Read a recording (and its rig when given by path) and render its raw images.
+
+    With the open ``rig`` (``rig_path`` None) a recording that does not fit it is still read:
+    with the ``rig.json`` beside it when that fits (the pair is opened together), else without a
+    rig and ``"misfit"`` saying why, for the window to offer closing the open rig."""
     if rig is None and rig_path is not None:
         rig = Rig.load(rig_path)
     progress(0.05, "reading the recording")
-    rec = Recording.load(rec_path, rig)
-    if rig is not None:
-        rec.check(rig)
+    out: dict[str, Any] = {}
+    if rig is not None and rig_path is None:  # the open rig: read first, then see whether it fits
+        rec = Recording.load(rec_path)
+        why = fit_problem(rig, rec)
+        if why is not None:
+            own = rig_beside(Path(rec_path))
+            own_rig = Rig.load(own) if own is not None else None
+            if own_rig is not None and fit_problem(own_rig, rec) is None:
+                rig, rig_path = own_rig, own
+                out["replaced_rig"] = why
+            else:
+                out["misfit"] = why
+                rig = None
+    else:
+        rec = Recording.load(rec_path, rig)
+        if rig is not None:
+            rec.check(rig)
     layers = raw_layers(rig, rec)
     renders = render_layers(layers, settings, progress.sub(0.6, 1.0))
-    return {"rig": rig, "rig_path": rig_path, "recording": rec, "recording_path": rec_path,
-            "layers": layers, "renders": renders}
+    out.update({"rig": rig, "rig_path": rig_path, "recording": rec, "recording_path": rec_path,
+                "layers": layers, "renders": renders})
+    return out
 
 
 #: Write the demo in a child process: building the scene holds the GIL for seconds in Open3D
@@ -208,6 +287,54 @@ def region_job(result: Any, region: tuple[str, Any], sources: list[str],
     return out
 
 
+REGION_FORMAT = "plantreg.region"
+
+
+def region_to_json(region: tuple[str, Any], target: str, shape: tuple[int, int]) -> str:
+    """A region as a versioned JSON text: kind, geometry in target pixels, and the target camera
+    and its (H, W) size it was drawn on (checked when it is loaded)."""
+    import json
+
+    kind, geom = region
+    g = [float(v) for v in geom] if kind == "rect" else [[float(x), float(y)] for x, y in geom]
+    return json.dumps({"format": REGION_FORMAT, "version": 1, "kind": kind, "shape": g, "target": target,
+                       "target_size": [int(shape[1]), int(shape[0])]}, indent=1) + "\n"
+
+
+def region_from_json(text: str, target: str, shape: tuple[int, int], path: Path | None = None) -> tuple[str, Any]:
+    """The region of :func:`region_to_json`'s text for a result on ``target`` of (H, W) ``shape``;
+    :class:`InputError` (naming ``path``) for another file, another target or size, or a bad shape."""
+    import json
+
+    try:
+        d = json.loads(text)
+    except ValueError as e:
+        raise InputError(f"not a region file (not valid JSON: {getattr(e, 'msg', e)})", path) from None
+    if not isinstance(d, dict) or d.get("format") != REGION_FORMAT:
+        raise InputError(f"not a region file (\"format\" is not \"{REGION_FORMAT}\")", path)
+    if d.get("version") != 1:
+        raise InputError(f"region file version {d.get('version')!r} is not one this plantreg reads (1)", path)
+    w, h = int(shape[1]), int(shape[0])
+    if d.get("target") != target or list(d.get("target_size") or []) != [w, h]:
+        raise InputError(f"the region was drawn on {d.get('target')} ({'x'.join(map(str, d.get('target_size') or []))}), "
+                         f"the result is on {target} ({w}x{h}): register into that camera first", path)
+    kind, g = d.get("kind"), d.get("shape")
+    try:
+        if kind == "rect":
+            geom: Any = tuple(float(v) for v in g)
+            ok = len(geom) == 4
+        elif kind == "polygon":
+            geom = [(float(x), float(y)) for x, y in g]
+            ok = len(geom) >= 3
+        else:
+            ok = False
+    except (TypeError, ValueError):
+        ok = False
+    if not ok or not all(np.isfinite(np.asarray(geom, float)).ravel()):
+        raise InputError("the region's \"kind\" must be rect (4 numbers) or polygon (3 or more [x, y])", path)
+    return kind, geom
+
+
 def region_csv(result: Any, region: tuple[str, Any], sources: list[str], info: dict[str, tuple[Any, str]],
                progress=None) -> str:
     from ..core.registration.region import stats_csv
@@ -292,7 +419,7 @@ class RegistrationSession:
     summary: str = ""                                          # HTML, see summary_html()
     cursor: tuple[str, int, int] | None = None                # (layer or "target", row, col)
     readout: str = ""
-    spectrum: tuple[np.ndarray, np.ndarray | None, str] | None = None
+    spectrum: tuple[np.ndarray, np.ndarray | None, str, str] | None = None   # values, nm, title, unit
     busy: dict[int, tuple[str, str]] = field(default_factory=dict)   # job id -> (kind, title)
     pending_target: str | None = None
     region: tuple[str, Any] | None = None    # ("rect", (x0, y0, x1, y1)) or ("polygon", [(x, y), ...]), target px
@@ -371,10 +498,22 @@ class RegistrationSession:
             self.events.raw.emit()
         self.events.source.emit()
 
+    def close(self) -> None:
+        """File ▸ Close: forget the rig, the recording or plant and the result (display settings stay)."""
+        self.rig = self.rig_path = self.recording = self.recording_path = self.plant = None
+        self.is_demo = False
+        self.pending_target = None
+        self.forget_registration()
+        self.raw, self.raw_renders, self.cursor, self.readout = [], {}, None, ""
+        self.events.raw.emit()
+        self.events.source.emit()
+
     def apply_loaded(self, out: dict) -> None:
-        """A :func:`load_job` / :func:`demo_job` result."""
+        """A :func:`load_job` / :func:`demo_job` result (``"misfit"``: shown without the open rig)."""
         self.plant = None
-        if out["rig"] is not None and out["rig"] is not self.rig:
+        if out.get("misfit"):
+            self.rig = self.rig_path = None
+        elif out["rig"] is not None and out["rig"] is not self.rig:
             self.rig, self.rig_path = out["rig"], out["rig_path"]
         self.recording, self.recording_path = out["recording"], out["recording_path"]
         self.is_demo = bool(out.get("demo"))
@@ -550,7 +689,7 @@ class RegistrationSession:
             title = f"{where} (raw) at x={col}, y={row}"
         if spec is not None:
             L, s = spec
-            self.spectrum = (s, L.wavelengths, title)  # all NaN = not mapped: the plot says so
+            self.spectrum = (s, L.wavelengths, title, L.unit)  # all NaN = not mapped: the plot says so
         self.cursor = (where, row, col)
         self.events.cursor.emit()
 
@@ -653,4 +792,4 @@ class RegistrationSession:
         return target
 
 
-__all__ = ["Event", "RegistrationSession", "load_job", "demo_job", "register_job", "plant3d_job", "object_box"]
+__all__ = ["Event", "RegistrationSession", "fit_problem", "recording_for_plant", "rig_beside", "load_job", "demo_job", "register_job", "plant3d_job", "object_box"]

@@ -141,6 +141,12 @@ class BundleResult:
     dof: int = 0
     #: camera -> RMS residual per coordinate (px)
     sigma_cam: dict[str, float] = field(default_factory=dict)
+    #: the board poses' side of the covariance, in the order of ``board_order``: camera ->
+    #: cross-covariance (n_c, 6 P) of its parameters with the board poses (rx, ry, rz, tx, ty, tz
+    #: each), and (6 P, 6 P) of the board poses (what a point fixed among the boards needs)
+    board_order: list[str] = field(default_factory=list)
+    cov_cam_board: dict[str, np.ndarray] = field(default_factory=dict)
+    cov_board: np.ndarray | None = None
 
 
 def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
@@ -368,6 +374,8 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
     s2 = float(np.sum(w[:, None] * allr**2) / dof)
     cov: dict[str, np.ndarray] = {}
     cross: dict[tuple[str, str], np.ndarray] = {}
+    cov_cb: dict[str, np.ndarray] = {}
+    cov_bb = None
     if covariance:
         # covariance of the camera parameters: s^2 (A - B C^-1 B^T)^-1 over the free ones
         B3 = B.reshape(nc, npose, 6).transpose(1, 0, 2)
@@ -381,6 +389,14 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
         cov = {c: full[coff[c] : coff[c] + npar[c], coff[c] : coff[c] + npar[c]] for c in cams}
         cross = {(a, b): full[coff[a] : coff[a] + npar[a], coff[b] : coff[b] + npar[b]]
                  for a in cams for b in cams if a != b}
+        # the inverse's other blocks: Cov_cb = -Cov_cc B C^-1, Cov_bb = s^2 C^-1 + C^-1 B^T Cov_cc B C^-1
+        Bf = np.where(free[:, None], B, 0.0)
+        M = np.einsum("ipj,pjk->ipk", Bf.reshape(nc, npose, 6), Cinv).reshape(nc, 6 * npose)
+        cov_cb_all = -full @ M
+        cov_bb = M.T @ full @ M
+        for i in range(npose):
+            cov_bb[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] += s2 * Cinv[i]
+        cov_cb = {c: cov_cb_all[coff[c] : coff[c] + npar[c]] for c in cams}
     out_cams = {}
     for c in cams:
         K = np.array([[intr[c][0], 0, intr[c][2]], [0, intr[c][1], intr[c][3]], [0, 0, 1.0]])
@@ -400,4 +416,4 @@ def bundle_adjust(cams: list[str], ref: str, blocks: dict[str, CameraBlock],
             residuals[(obs[k][0], c)] = res[c][starts[m] : e] * scale[c]
     progress(1.0, "joint refinement done")
     return BundleResult(out_cams, out_boards, rms, float(np.sqrt(s2)), names, cov, cross, residuals, it, dof,
-                        sigma_cam)
+                        sigma_cam, poses, cov_cb, cov_bb)

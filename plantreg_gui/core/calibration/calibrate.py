@@ -50,8 +50,7 @@ from .board import Board
 from .bundle import DIST_NAMES, CameraBlock, bundle_adjust, param_names
 from .known import KnownIntrinsics, check_known_intrinsics, load_known_intrinsics, session_known_intrinsics
 from .lensmodel import MODEL_BY_NAME, ModelChoice, choose_model, fit_camera, focal_rel_std, principal_point_prior
-from .uncertainty import (MAX_PROJECTION_SIGMA_COVERED, MAX_PROJECTION_SIGMA_MEDIAN, MAX_ROTATION_SIGMA_DEG,
-                          MAX_TRANSLATION_SIGMA_MM,
+from .uncertainty import (MAX_PROJECTION_SIGMA_COVERED, MAX_PROJECTION_SIGMA_MEDIAN, MAX_TRANSLATION_SIGMA_MM,
                           CameraUncertainty, projection_uncertainty, uncertainty_problems)
 from .detect import FOUND, MISSING, Detection, check_image_sizes, suggest_board_size
 from .session import Session
@@ -157,7 +156,7 @@ class Calibration:
             "flipped_views": sorted(f"{p}:{c}" for p, c in self.flipped),
             "uncertainty_limits": {"projection_sigma_median_px_or_diagonal": list(MAX_PROJECTION_SIGMA_MEDIAN),
                                    "projection_sigma_where_seen_px_or_diagonal": list(MAX_PROJECTION_SIGMA_COVERED),
-                                   "rotation_sigma_deg": MAX_ROTATION_SIGMA_DEG,
+                                   "rig_projection_sigma_median_px_or_diagonal": list(MAX_PROJECTION_SIGMA_MEDIAN),
                                    "translation_sigma_mm": MAX_TRANSLATION_SIGMA_MM},
             "cameras": {n: {"rms_px": c.rms_px, "mean_px": c.mean_px,
                             "mean_normalized": c.mean_px * c.normalization, "n_views": c.n_views,
@@ -563,8 +562,10 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
         w, h = sizes[cam]
         used_uv = [views[cam][p].corners.astype(float) for p in views[cam] if (p, cam) not in outliers]
         dists = [float(np.linalg.norm(init[p][1])) for p in views[cam] if (p, cam) not in outliers]
+        tb = np.array([board_res[p][1] for p in ba.board_order])
         unc[cam] = projection_uncertainty(cam, K, dist, R, t, ba.cov[cam], ba.names[cam], (w, h),
-                                          float(np.median(dists)), used_uv, cam == ref)
+                                          float(np.median(dists)), used_uv, cam == ref,
+                                          (tb, ba.cov_cam_board[cam], ba.cov_board))
         cc = CameraCalibration(cam, session.cameras[cam], w, h, K, dist, rms, float(allr.mean()),
                                dict(sorted(per_view.items())), weak, len(per_view))
         cc.model = intr[cam][3]

@@ -130,7 +130,8 @@ class CalibrationReport:
 
     def _uncertainty_csv(self) -> str:
         """One row per camera parameter: value and standard error; then each camera's projection
-        uncertainty (median and worst over the image, px) at its working distance."""
+        uncertainty (median and worst over the image, px) at its working distance, and mrcal's
+        figure (among the boards) there and at other multiples of it."""
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(["camera", "parameter", "value", "std", "unit"])
@@ -142,9 +143,11 @@ class CalibrationReport:
                 v = vals.get(k)
                 w.writerow([c, k, "" if v is None else f"{v:.6g}", f"{sd:.4g}" if sd > 0 else "fixed", unit])
             ps = u.get("projection_sigma_px", {})
-            for k in ("median", "worst", "rig_median", "rig_worst"):
-                if k in ps:
+            for k in ("median", "worst", "rig_median", "rig_worst", "among_boards_median"):
+                if ps.get(k) is not None:
                     w.writerow([c, f"projection_sigma_{k}", "", f"{ps[k]:.4g}", "px"])
+            for f, v in (ps.get("among_boards_median_by_distance") or {}).items():
+                w.writerow([c, f"projection_sigma_among_boards_median_at_{f}", "", f"{v:.4g}", "px"])
             w.writerow([c, "working_distance", f"{u.get('working_distance_m', float('nan')):.4g}", "", "m"])
             lm = u.get("lens_model", {})
             if lm:

@@ -118,6 +118,12 @@ class Session:
     def path(self) -> Path:
         return Path(self.folder) / SESSION_FILE
 
+    def inputs(self) -> list[Path]:
+        """What calibrating reads: the folder, ``session.json``, every image and depth map (an
+        output must never replace one: docs/errors.md, "Paths, names and outputs")."""
+        return [Path(self.folder), self.path] + [Path(f) for pose in self.poses
+                                                 for f in [*pose.images.values(), *([pose.depth] if pose.depth else [])]]
+
     @property
     def camera_names(self) -> list[str]:
         return list(self.cameras)

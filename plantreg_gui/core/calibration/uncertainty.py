@@ -25,7 +25,9 @@ error says nothing about whether the data determine the model; this does.
 camera's lens-model projection uncertainty, its median over the image
 (``MAX_PROJECTION_SIGMA_MEDIAN``: px, or a fraction of the image diagonal for large images) and its
 worst where the camera saw board corners (``MAX_PROJECTION_SIGMA_COVERED``); a camera's pose relative to the reference
-(``MAX_ROTATION_SIGMA_DEG``, ``MAX_TRANSLATION_SIGMA_MM``).
+by its projection of points fixed in the reference camera's frame (the ``rig`` figure, median,
+``MAX_PROJECTION_SIGMA_MEDIAN``: a rotation traded against the camera's principal point moves
+nothing there) and its translation (``MAX_TRANSLATION_SIGMA_MM``).
 """
 
 from __future__ import annotations
@@ -45,10 +47,11 @@ MAX_PROJECTION_SIGMA_MEDIAN = (1.0, 0.002)
 #: or fraction of the diagonal; outside them the figure is reported, not limited (the corners of
 #: an image nobody put a board in are extrapolation, shown on the heat map)
 MAX_PROJECTION_SIGMA_COVERED = (2.0, 0.004)
-MAX_ROTATION_SIGMA_DEG = 0.25
 MAX_TRANSLATION_SIGMA_MM = 10.0
 #: grid cells along the image's longer side
 GRID_CELLS = 24
+#: multiples of the working distance at which mrcal's figure is also reported (1000: far away)
+BOARDS_DISTANCE_FACTORS = (0.5, 2.0, 1000.0)
 
 
 @dataclass
@@ -73,6 +76,11 @@ class CameraUncertainty:
     add_views: list[str] = field(default_factory=list)
     width: int = 0
     height: int = 0
+    #: (H, W) px: mrcal's figure, the point fixed among the board poses (see
+    #: :func:`sigma_among_boards`); reported, not limited
+    sigma_boards: np.ndarray | None = None
+    #: multiple of the working distance -> median of ``sigma_boards`` there (px)
+    boards_by_distance: dict[float, float] = field(default_factory=dict)
 
     def summary(self, which: str = "intrinsics") -> tuple[float, float]:
         """(median, worst) over the image, px."""
@@ -94,7 +102,11 @@ class CameraUncertainty:
         mr, wr = self.summary("rig")
         return {"std": self.std, "working_distance_m": self.distance_m,
                 "projection_sigma_px": {"median": mi, "worst": wi, "worst_where_seen": self.covered_worst,
-                                        "rig_median": mr, "rig_worst": wr},
+                                        "rig_median": mr, "rig_worst": wr,
+                                        "among_boards_median": float(np.median(self.sigma_boards))
+                                        if self.sigma_boards is not None else None,
+                                        "among_boards_median_by_distance": {
+                                            f"{f:g}x": v for f, v in self.boards_by_distance.items()}},
                 "least_determined": self.worst_param,
                 "rotation_sigma_deg": self.rotation_deg, "translation_sigma_mm": self.translation_mm,
                 "add_views_here": self.add_views,
@@ -126,9 +138,33 @@ def _worst_direction(S: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum((a + d) / 2 + np.sqrt(((a - d) / 2) ** 2 + b * b), 0.0))
 
 
+def sigma_among_boards(J_cam: np.ndarray, dq_dZ: np.ndarray, X_rig: np.ndarray, R_cam_rig: np.ndarray,
+                       cov: np.ndarray, t_rig_board: np.ndarray, cov_cam_board: np.ndarray,
+                       cov_board: np.ndarray) -> np.ndarray:
+    """(n,) px: the projection uncertainty of points ``X_rig`` (n, 3) fixed among the board poses
+    (mrcal's "mean frames": the point moves with the mean of the boards' perturbations, so a shift of
+    cx that a turn of every board relative to the camera undoes, or a focal length that a change of
+    every board's distance undoes, does not count). ``J_cam`` (n, 2, n_c) d q / d camera
+    parameters (point fixed in the rig), ``dq_dZ`` (n, 2, 3), ``t_rig_board`` (P, 3),
+    ``cov_cam_board`` (n_c, 6 P), ``cov_board`` (6 P, 6 P)."""
+    P = len(t_rig_board)
+    n = len(X_rig)
+    # board i perturbed (R <- exp(w) R, t <- t + dt) moves X by w x (X - t_i) + dt; the mean over i
+    dX = np.zeros((n, 3, 6 * P))
+    for i in range(P):
+        dX[:, :, 6 * i : 6 * i + 3] = -_skew(X_rig - t_rig_board[i]) / P
+        dX[:, :, 6 * i + 3 : 6 * i + 6] = np.eye(3) / P
+    Jb = np.einsum("nij,njk->nik", dq_dZ @ R_cam_rig, dX)
+    S = (np.einsum("nij,jk,nlk->nil", J_cam, cov, J_cam) + np.einsum("nij,jk,nlk->nil", Jb, cov_board, Jb)
+         + 2 * np.einsum("nij,jk,nlk->nil", J_cam, cov_cam_board, Jb))
+    S = 0.5 * (S + S.transpose(0, 2, 1))
+    return _worst_direction(S)
+
+
 def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig: np.ndarray,
                            t_cam_rig: np.ndarray, cov: np.ndarray, param_names: list[str], size: tuple[int, int],
-                           distance_m: float, views_uv: list[np.ndarray], is_reference: bool) -> CameraUncertainty:
+                           distance_m: float, views_uv: list[np.ndarray], is_reference: bool,
+                           boards: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> CameraUncertainty:
     """The uncertainty of one camera (see the module docstring). ``cov`` (n, n) of the
     parameters ``param_names`` (fx, fy, cx, cy, dist..., rx, ry, rz, tx, ty, tz);
     ``views_uv`` [(N, 2)] the used corners of each view (for the coverage map: the number of
@@ -149,6 +185,10 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
     # them: d Z / d w = -[Z - t]x, d Z / d t = I
     Jr = np.concatenate([Ji, -dq_dZ @ _skew(X_cam - t_cam_rig), dq_dZ], axis=2)
     sig_r = _worst_direction(np.einsum("nij,jk,nlk->nil", Jr, cov, Jr)).reshape(len(gv), len(gu))
+    sig_b = None
+    if boards is not None:
+        X_rig = (X_cam - t_cam_rig) @ R_cam_rig
+        sig_b = sigma_among_boards(Jr, dq_dZ, X_rig, R_cam_rig, cov, *boards).reshape(len(gv), len(gu))
     # standard errors
     var = np.diag(cov)
     std: dict[str, float] = {}
@@ -182,7 +222,16 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
             add.append(r)
         if len(add) >= 3:
             break
-    return CameraUncertainty(name, std, float(distance_m), gu, gv, sig_i, sig_r, cnt, worst, rot, trans, add, w, h)
+    out = CameraUncertainty(name, std, float(distance_m), gu, gv, sig_i, sig_r, cnt, worst, rot, trans, add, w, h)
+    out.sigma_boards = sig_b
+    if boards is not None:
+        for f in BOARDS_DISTANCE_FACTORS:
+            Xf = np.c_[xy, np.ones(len(xy))] * distance_m * f
+            _q, dq_dZf, Jif = project_jac(Xf, K, dist)
+            Jrf = np.concatenate([Jif, -dq_dZf @ _skew(Xf - t_cam_rig), dq_dZf], axis=2)
+            out.boards_by_distance[f] = float(np.median(
+                sigma_among_boards(Jrf, dq_dZf, (Xf - t_cam_rig) @ R_cam_rig, R_cam_rig, cov, *boards)))
+    return out
 
 
 def limits_px(u: CameraUncertainty) -> tuple[float, float]:
@@ -191,10 +240,8 @@ def limits_px(u: CameraUncertainty) -> tuple[float, float]:
     return max(a, fa * u.diagonal), max(b, fb * u.diagonal)
 
 
-def uncertainty_problems(unc: dict[str, CameraUncertainty], max_deg: float | None = None,
-                         max_mm: float | None = None) -> list[str]:
+def uncertainty_problems(unc: dict[str, CameraUncertainty], max_mm: float | None = None) -> list[str]:
     """One sentence per camera whose uncertainty exceeds a limit, naming the parameter."""
-    max_deg = MAX_ROTATION_SIGMA_DEG if max_deg is None else max_deg
     max_mm = MAX_TRANSLATION_SIGMA_MM if max_mm is None else max_mm
     out = []
     for name, u in unc.items():
@@ -211,9 +258,16 @@ def uncertainty_problems(unc: dict[str, CameraUncertainty], max_deg: float | Non
             out.append(f"camera '{name}': projection uncertainty up to {seen:.2f} px where it saw the board (at "
                        f"{u.distance_m:.2f} m) exceeds the limit of {lim_seen:.2f} px; {where}; add board views in the {', '.join(u.add_views)} of the image, "
                        "tilted, at several distances")
-        if u.rotation_deg is not None and (not np.isfinite(u.rotation_deg) or u.rotation_deg > max_deg):
-            out.append(f"camera '{name}': rotation relative to the reference uncertain by +- {u.rotation_deg:.3f} deg "
-                       f"(limit {max_deg:g} deg); record more poses seen by it and the reference camera together")
+        if u.rotation_deg is not None:
+            # the pose judged by what it does where the camera sees: a rotation traded against the
+            # camera's own principal point (a thermal camera's +- 1 deg and +- 2 px) moves nothing
+            rig_med = u.summary("rig")[0]
+            if not np.isfinite(rig_med) or rig_med > lim_med:
+                out.append(f"camera '{name}': its pose relative to the reference (rotation +- {u.rotation_deg:.3f} deg, "
+                           f"translation +- {u.translation_mm:.2f} mm) leaves where it sees points fixed in the "
+                           f"reference camera's frame uncertain by {rig_med:.2f} px (median over the image, at "
+                           f"{u.distance_m:.2f} m), beyond the limit of {lim_med:.2f} px; record more poses seen by it "
+                           "and the reference camera together")
         if u.translation_mm is not None and (not np.isfinite(u.translation_mm) or u.translation_mm > max_mm):
             out.append(f"camera '{name}': translation relative to the reference uncertain by +- {u.translation_mm:.2f} mm "
                        f"(limit {max_mm:g} mm); record more poses seen by it and the reference camera together, "

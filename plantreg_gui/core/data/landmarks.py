@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.imageio import atomic_write_text, read_json
+from ..io.paths import check_input_folder
 
 FORMAT = "plantreg.landmarks"
 VERSION = 1
@@ -146,9 +147,7 @@ class LandmarkSet:
         """Read a landmarks file. With ``rig``, check camera names (and pixels against image
         sizes); with ``check_recordings``, check that every recording folder has a recording.json."""
         path = Path(path)
-        if not path.is_file():
-            raise InputError("landmarks file not found", path)
-        ls = cls.from_dict(read_json(path), path, path.parent)
+        ls = cls.from_dict(read_json(path, "landmarks file"), path, path.parent)
         if rig is not None:
             ls.check(rig)
         if check_recordings:
@@ -183,8 +182,10 @@ class LandmarkSet:
 
         for key in self.recordings:
             f = self.folder(key)
-            if not f.is_dir():
-                raise InputError(f"recording '{key}' does not exist (no folder {f})", self.path)
+            try:
+                check_input_folder(f, f"recording '{key}'")
+            except InputError as e:
+                raise InputError(f"{e.detail} ({f})", self.path) from None
             if not (f / MANIFEST).is_file():
                 raise InputError(f"recording '{key}' is not a recording folder (no {MANIFEST} in {f})", self.path)
 

@@ -6,6 +6,7 @@ paths relative to the folder. Images keep their values (see :mod:`.imageio`).
 
 from __future__ import annotations
 
+import glob
 import json
 import os
 from dataclasses import dataclass, field
@@ -15,7 +16,8 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InputError
-from ..io.imageio import atomic_write_text, check_input_file, image_decoder, read_json
+from ..io.imageio import atomic_write_text, image_decoder, read_json
+from ..io.paths import check_input_file, check_input_folder
 from ..camera.rig import Rig
 
 MANIFEST = "recording.json"
@@ -54,12 +56,11 @@ class Recording:
         if folder.is_file() and folder.name == MANIFEST:  # the manifest itself was given
             folder = folder.parent
         manifest = folder / MANIFEST
-        if not folder.is_dir():
-            raise InputError("recording folder not found", folder)
+        check_input_folder(folder, "recording folder")
         if not os.path.lexists(manifest):
             raise InputError(f"not a recording folder (no {MANIFEST})", folder)
         m = read_json(manifest, MANIFEST)
-        entries = _manifest_entries(m, manifest)
+        entries = manifest_entries(m, manifest)
         paths: dict[str, Path] = {}
         images: dict[str, np.ndarray] = {}
         for name, p in entries.items():  # names and paths checked before any image is read
@@ -199,7 +200,27 @@ def _file_size(path: Path) -> int:
         return 0
 
 
-def _manifest_entries(m: Any, manifest: Path) -> dict[str | None, Path]:
+def recording_inputs(folder: str | Path) -> list[Path]:
+    """What registering the recording in ``folder`` reads, without reading any image: the
+    folder, its ``recording.json`` and every file listed there (an ENVI header with its data
+    files). For output checks: an output must never replace one of them. A manifest that cannot
+    be read gives the folder and the manifest only (reading the recording names the problem)."""
+    folder = Path(folder)
+    if folder.name == MANIFEST:
+        folder = folder.parent
+    out = [folder, folder / MANIFEST]
+    try:
+        entries = manifest_entries(read_json(folder / MANIFEST, MANIFEST), folder / MANIFEST)
+    except InputError:
+        return out
+    for p in entries.values():
+        out.append(p)
+        if p.suffix.lower() == ".hdr" and "\x00" not in str(p):
+            out += [p.with_suffix(""), *p.parent.glob(glob.escape(p.stem) + ".*")]
+    return out
+
+
+def manifest_entries(m: Any, manifest: Path) -> dict[str | None, Path]:
     """Camera name (None for the depth map) -> path, from ``recording.json``'s content. Types and
     names are checked here (a null or a number is named as such, not reported as a missing file
     called "None"). Paths are relative to the folder; absolute ones and ones leading out of it

@@ -20,8 +20,6 @@ from __future__ import annotations
 import errno
 import os
 import shutil
-import stat
-import tempfile
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
@@ -32,6 +30,7 @@ import numpy as np
 
 from ..errors import InputError, one_line
 from .. import signals
+from .paths import check_destination, check_input_file, check_output_location, temp_beside  # noqa: F401 (the writers' and readers' checks; check_output_location is imported from here too)
 
 #: Still formats OpenCV decodes besides PNG/JPEG/TIFF (thermal and machine-vision cameras write
 #: 16-bit PGM, 8-bit PPM, BMP): suffix -> (format name, accepted file signatures).
@@ -57,38 +56,6 @@ MAX_JSON_BYTES = 64 << 20
 
 #: dtype kinds an image may have: booleans, integers, floats (real numbers).
 _REAL_KINDS = "biuf"
-
-
-def check_input_file(path: str | Path, what: str = "file") -> Path:
-    """Raise :class:`InputError` naming ``path`` unless it is an existing, readable regular file.
-
-    A folder, FIFO, socket or device (``/dev/zero``) is refused as "not a regular file" (reading
-    a FIFO would block, a device never ends); a permission problem is named as such.
-    """
-    path = Path(path)
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        raise InputError(f"{what} is missing (not found)", path) from None
-    except PermissionError:
-        raise InputError(f"{what} cannot be reached (permission denied on a folder of its path)", path) from None
-    except OSError as e:
-        raise InputError(f"{what} cannot be read ({e.strerror or e})", path) from None
-    if stat.S_ISDIR(st.st_mode):
-        raise InputError(f"{what} is a folder, not a regular file", path)
-    if not stat.S_ISREG(st.st_mode):
-        kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(st.st_mode) else "a device" if
-                (stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode)) else "a socket" if stat.S_ISSOCK(st.st_mode)
-                else "special")
-        raise InputError(f"{what} is {kind}, not a regular file", path)
-    try:
-        with open(path, "rb"):
-            pass
-    except PermissionError:
-        raise InputError(f"{what} is not readable (permission denied)", path) from None
-    except OSError as e:
-        raise InputError(f"{what} cannot be read ({e.strerror or e})", path) from None
-    return path
 
 
 def _check_array_header(path: Path, shape: tuple[int, ...], dtype: np.dtype, what: str = "header") -> None:
@@ -310,8 +277,9 @@ def _read_envi(path: Path) -> Callable[[], np.ndarray]:
     stem = path.with_suffix("")
     exts = [""] + [e.lower() for e in envi.KNOWN_EXTS] + [inter]
     exts += [e.upper() for e in exts if e]
-    data = next((Path(f"{stem}.{e}" if e else str(stem)) for e in exts
-                 if os.path.lexists(f"{stem}.{e}" if e else str(stem))), None)
+    candidates = [Path(f"{stem}.{e}" if e else str(stem)) for e in exts]
+    # a folder of that name (a sibling "hyperspectral/" beside "hyperspectral.hdr") is not a data file
+    data = next((c for c in candidates if os.path.lexists(c) and not c.is_dir()), None)
     if data is None:
         raise InputError(f"ENVI data file not found beside the header ({stem.name}.img, .dat, .raw, ...)", path)
     check_input_file(data, "ENVI data file")
@@ -380,6 +348,8 @@ def image_decoder(path: str | Path) -> Callable[[], np.ndarray]:
     (:func:`~plantreg_gui.core.data.recording.read_images`). Both steps raise :class:`InputError`.
     The function's ``pixel_file`` is the file it reads (an ENVI header's data file)."""
     path = check_input_file(path, "image")
+    if path.stat().st_size == 0:
+        raise InputError("image file is empty (0 bytes)", path)
     suffix = path.suffix.lower()
 
     def header():
@@ -509,14 +479,11 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     and nothing half-written ever carries the final name. OS errors (disk full, permission) name
     ``path``, never the temporary name.
     """
-    path = Path(path)
+    path = check_destination(path)
     tmp: Path | None = None
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
         with signals.deferred():  # a temporary is never created without its name being known here
-            fd, tmp_s = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=path.parent)
-            os.close(fd)
-            tmp = Path(tmp_s)
+            tmp = temp_beside(path)
         yield tmp
         _publish(tmp)
         os.replace(tmp, path)
@@ -573,59 +540,6 @@ def write_tiff(path: str | Path, img: np.ndarray) -> None:
         tifffile.imwrite(tmp, a, **kw)
 
 
-# ---------------------------------------------------------------------- output locations
-def _nearest_existing(p: Path) -> Path:
-    p = p.absolute()
-    while not os.path.lexists(p) and p != p.parent:
-        p = p.parent
-    return p
-
-
-def check_output_location(out: str | Path, what: str = "output", *, folder: bool = False,
-                          overwrite: bool = False, inputs: Iterator[str | Path] | list = ()) -> Path:
-    """Validate an output path before any expensive work; raises :class:`InputError` naming it.
-
-    Refused: an empty path (an unset shell variable would otherwise mean the current folder);
-    a path that is, contains or lies inside one of ``inputs`` (files or folders); an existing
-    output unless ``overwrite`` (a non-empty folder when ``folder``, any file otherwise); a file
-    where a folder is wanted and vice versa; a mount point to be replaced; a location where no
-    file can be created (probed by creating and removing a hidden temporary file there, which
-    also catches read-only file systems and root-squashed mounts that permission bits do not show).
-    """
-    if str(out) == "":
-        raise InputError(f"{what} path is empty (an unset shell variable?)")
-    out = Path(out)
-    out_r = out.resolve()
-    for p in inputs:
-        p_r = Path(p).resolve()
-        if p_r == out_r or out_r in p_r.parents:
-            raise InputError(f"the {what} would replace an input ({p}); choose a location outside the inputs", out)
-    if os.path.lexists(out):
-        if out.is_symlink() and not out.exists():
-            pass  # a dangling link: replaced like a file (docs/errors.md)
-        elif folder and not out.is_dir():
-            raise InputError(f"{what} path exists and is not a folder", out)
-        elif not folder and out.is_dir():
-            raise InputError(f"{what} path is a folder, expected a file name", out)
-        elif folder and any(out.iterdir()) and not overwrite:
-            raise InputError(f"{what} folder exists and is not empty (choose another, or pass --overwrite)", out)
-        elif not folder and not overwrite:
-            raise InputError(f"{what} file exists (choose another name, or pass --overwrite to replace it)", out)
-        if overwrite and folder and out.is_dir() and not out.is_symlink() and os.path.ismount(out):
-            raise InputError(f"{what} folder is a mount point and cannot be replaced; choose a folder inside it", out)
-    base = _nearest_existing(out.parent)
-    if not base.is_dir():
-        raise InputError(f"{what} cannot be made: {base} is a file, not a folder", out)
-    try:
-        with signals.deferred():
-            fd, probe = tempfile.mkstemp(prefix=".plantreg-probe.", dir=base)
-            os.close(fd)
-            os.unlink(probe)
-    except OSError as e:
-        raise InputError(f"{what} cannot be written: {base} is not writable ({e.strerror or e})", out) from None
-    return out
-
-
 @contextmanager
 def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path]:
     """Build an output folder under a temporary name and move it into place at the end.
@@ -636,24 +550,19 @@ def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path
     no temporary folder beside it; OS errors name paths under ``out``, never the temporary name.
     ``--overwrite`` onto a symbolic link replaces the link with a folder; its target is untouched.
     """
-    if str(out) == "":
-        raise InputError("output path is empty (an unset shell variable?)")
-    out = Path(out)
-    if os.path.lexists(out) and not out.is_dir():
-        raise InputError("output path exists and is not a folder", out)
+    out = check_destination(out, folder=True)
     if out.is_dir() and any(out.iterdir()) and not overwrite:
         raise InputError("output folder exists and is not empty (choose another, or allow overwriting)", out)
     tmp: Path | None = None
     old: Path | None = None
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
         with signals.deferred():
-            tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+            tmp = temp_beside(out, folder=True)
         yield tmp
         _publish(tmp, is_dir=True)
         with signals.deferred():
             if os.path.lexists(out):
-                old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+                old = temp_beside(out, folder=True, suffix=".old")
                 os.replace(out, old / "x")
             try:
                 os.replace(tmp, out)
@@ -697,11 +606,9 @@ def atomic_files(paths: list[str | Path], remove: list[str | Path] = ()) -> Iter
     try:
         for p in finals:
             current = p
-            p.parent.mkdir(parents=True, exist_ok=True)
+            check_destination(p)
             with signals.deferred():
-                fd, t = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".part{p.suffix}", dir=p.parent)
-                os.close(fd)
-                tmps[p] = Path(t)
+                tmps[p] = temp_beside(p)
         current = None
         yield dict(tmps)
         with signals.deferred():
@@ -709,10 +616,9 @@ def atomic_files(paths: list[str | Path], remove: list[str | Path] = ()) -> Iter
                 for p in finals + stale:
                     current = p
                     if os.path.lexists(p):
-                        fd, b = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".old{p.suffix}", dir=p.parent)
-                        os.close(fd)
+                        b = temp_beside(p, suffix=".old")
                         os.replace(p, b)
-                        moved.append((p, Path(b)))
+                        moved.append((p, b))
                 for p in finals:
                     current = p
                     _publish(tmps[p])

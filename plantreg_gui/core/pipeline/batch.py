@@ -32,6 +32,7 @@ import json
 import os
 import socket
 import time
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -74,10 +75,13 @@ def read_manifest(path: str | Path) -> list[Path]:
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"cannot read the list of recordings ({e})", path) from None
     out: list[Path] = []
-    for row in csv.reader(io.StringIO(text)):
+    rows = csv.reader(io.StringIO(text))
+    for row in rows:
         if not row or not row[0].strip() or row[0].lstrip().startswith("#"):
             continue
         cell = row[0].strip()
+        if "\x00" in cell:
+            raise InputError(f"line {rows.line_num} holds a NUL character, which no folder name can hold", path)
         if not out and cell.lower() in ("recording", "recordings", "path", "folder"):
             continue
         p = Path(cell).expanduser()
@@ -103,7 +107,8 @@ def expand_inputs(items: Iterable[str | Path]) -> list[Path]:
 def plan(recordings: Iterable[str | Path], out: str | Path) -> list[Job]:
     """One :class:`Job` per recording, output folder ``out/<folder name>``. Raises
     :class:`InputError` listing the clashes when two recordings would write the same folder
-    (same name, or names equal but for case: case-insensitive file systems)."""
+    (same name, or names equal but for case -- case-insensitive file systems -- or for their
+    Unicode spelling: "Ä" as one code point or "A" + a combining accent, which look the same)."""
     jobs: list[Job] = []
     seen: dict[str, Path] = {}
     clashes: list[str] = []
@@ -113,7 +118,7 @@ def plan(recordings: Iterable[str | Path], out: str | Path) -> list[Job]:
         if name in (BATCH_CSV,) or name.startswith("."):
             clashes.append(f"{p} (its name '{name}' is reserved in the output folder)")
             continue
-        key = name.lower()
+        key = unicodedata.normalize("NFC", name).casefold()  # "Ä" typed, or "A" + accent from macOS
         if key in seen:
             if seen[key] == p:
                 clashes.append(f"{p} is listed twice")

@@ -945,7 +945,12 @@ def fit_rig_from_file(rig: Rig, landmarks: LandmarkSet, snap_depth: bool = True,
     recs = load_recording_landmarks(rig, landmarks)
     for r in recs:
         r.snap_depth = snap_depth
-    return fit_rig(rig, recs, **kw)
+    try:
+        return fit_rig(rig, recs, **kw)
+    except InputError as e:  # what the landmarks do not determine: named as the landmarks file's problem
+        if e.path is not None or landmarks.path is None or e.detail.startswith("cannot free"):
+            raise
+        raise InputError(e.detail, landmarks.path) from None
 
 
 def format_report(report: dict[str, Any], worst: int = 10) -> str:

@@ -90,9 +90,14 @@ def save_job(calibration, session, report, excluded: set[Key], rig_path: Path, r
     rig = calibrated_rig(calibration, session, report, roi=(np.asarray(roi_min, float), np.asarray(roi_max, float)),
                          excluded=set(excluded))
     rig_path = Path(rig_path)
+    from ...core.calibration.report import report_files, write_calibration
+    from ...core.io.paths import check_output_location
+
+    # the dialogs asked before replacing a file; an input of the session is never replaced
+    for f in [rig_path, *(report_files(report_path) if report is not None and report_path is not None else [])]:
+        check_output_location(f, "output", overwrite=True, inputs=session.inputs())
     rig_path.parent.mkdir(parents=True, exist_ok=True)
     out: dict[str, str] = {"rig": str(rig_path)}
-    from ...core.calibration.report import write_calibration
 
     if report is not None and report_path is not None:
         progress(0.4, "writing rig file, report and CSV tables")

@@ -98,9 +98,11 @@ class RigPage(WizardPage):
                                                         "'450, 550, 650' or evenly spaced 'FIRST-LAST/COUNT', e.g. "
                                                         "'400-1000/100' (kept in the rig file; the registration "
                                                         "shows spectra in nm with it)")
-        self.cameras.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
-        for col in (2, 3, 4):  # units, bands, lens file take what they need; name and modality share the rest
-            self.cameras.horizontalHeader().setSectionResizeMode(col, QHeaderView.ResizeMode.ResizeToContents)
+        # every column as wide as its header and cells ("lame (= file name" and "ıyperspectral" were cut
+        # when name and modality shared what was left); the lens file takes the rest; the table scrolls
+        self.cameras.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        self.cameras.horizontalHeader().setStretchLastSection(True)
+        self.cameras.horizontalHeader().setSectionResizeMode(1, QHeaderView.ResizeMode.Interactive)
         self.cameras.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.cameras.itemChanged.connect(self._changed)
         self.cameras.setMaximumHeight(230)
@@ -234,6 +236,8 @@ class RigPage(WizardPage):
         combo.setCurrentText(modality)
         combo.currentTextChanged.connect(self._changed)
         self.cameras.setCellWidget(r, 1, combo)
+        # a cell widget is not measured by ResizeToContents: the column takes the widest combo
+        self.cameras.setColumnWidth(1, max(self.cameras.columnWidth(1), combo.sizeHint().width()))
         self._refresh_depth_combo()
         self._changed()
 

@@ -2,7 +2,7 @@
 
 Pages: 1 rig and board, 2 capture list, 3 corner review, 4 intrinsics, 5 extrinsics, 6 depth,
 7 save. Going to a page runs what it needs (detection, calibration, error tables) as a queue of
-steps on :class:`~plantreg_gui.gui.workers.Worker` s, one at a time; the page is shown at once
+steps on the GUI's one job runner (:class:`~plantreg_gui.gui.workers.Jobs`), one at a time; the page is shown at once
 and fills in when the results arrive. Back always works; Cancel stops the running step and
 clears the queue. The wizard holds no computation: :mod:`.jobs` calls the engine.
 """
@@ -14,10 +14,10 @@ from typing import Any, Callable
 
 import numpy as np
 from PySide6.QtCore import QObject, QStandardPaths, QTimer, Signal, Slot
-from PySide6.QtWidgets import (QHBoxLayout, QLabel, QListWidget, QListWidgetItem, QProgressBar,
-                               QPushButton, QSizePolicy, QStackedWidget, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (QFrame, QHBoxLayout, QLabel, QListWidget, QListWidgetItem, QProgressBar,
+                               QPushButton, QScrollArea, QSizePolicy, QStackedWidget, QVBoxLayout, QWidget)
 
-from ..workers import Worker, show_error
+from ..workers import Jobs, Worker, show_error
 from . import jobs
 from .capture_page import CapturePage
 from .depth_page import DepthPage
@@ -59,6 +59,8 @@ class CalibrationWizard(QWidget):
         self._relay.detection.connect(self._on_detection)
         self._job_session = None
         self._job_step = ""  # the running step of STEPS, or another job's title
+        self.jobs = Jobs(self, on_progress=lambda _title, f, msg: self._on_progress(f, msg),
+                         on_cancelled=lambda _title: self._on_cancelled(), on_end=lambda _w: self._on_done())
         self._on_result: Callable[[Any], None] | None = None
         self._demo_folder: Path | None = None
         self._pending_progress: tuple[float, str] | None = None
@@ -84,7 +86,13 @@ class CalibrationWizard(QWidget):
         self.pages = [cls(self.model, self) for cls in (RigPage, CapturePage, ReviewPage, IntrinsicsPage,
                                                          ExtrinsicsPage, DepthPage, SavePage)]
         for i, p in enumerate(self.pages):
-            self.stack.addWidget(p)
+            # a page wider or taller than the window scrolls: the window fits half a 1920 px
+            # screen or a 1280 x 720 laptop whatever the page's tables need
+            sc = QScrollArea()
+            sc.setWidget(p)
+            sc.setWidgetResizable(True)
+            sc.setFrameShape(QFrame.Shape.NoFrame)
+            self.stack.addWidget(sc)
             QListWidgetItem(f"{i + 1}  {p.title}", self.steps)
         self.steps.currentRowChanged.connect(lambda r: self.go_to_page(r + 1) if r >= 0 else None)
 
@@ -283,12 +291,12 @@ class CalibrationWizard(QWidget):
                 if not m.calibration_ready():
                     self._start("Calibrating", jobs.calibrate_job,
                                 (m.session, dict(m.detections), set(m.excluded)), m.set_calibration,
-                                session=m.session)
+                                session=m.session, step="calibrate")
             elif step == "tables":
                 if m.calibration_ready() and not m.report_ready():
                     self._start("Computing error tables", jobs.tables_job,
                                 (m.session, m.calibration, dict(m.detections), set(m.excluded)), m.set_report,
-                                session=m.session)
+                                session=m.session, step="tables")
         if self._worker is None:
             self._set_busy(False)
             self.idle.emit()
@@ -302,31 +310,27 @@ class CalibrationWizard(QWidget):
 
         self._start("Detecting corners", jobs.detect_job,
                     (session, dict(options), None if keys is None else set(keys), sink), None,
-                    session=session)
+                    session=session, step="detect")
 
     def _start(self, title: str, fn: Callable, args: tuple, on_result: Callable[[Any], None] | None,
-               session=None) -> None:
-        """Run ``fn(*args)`` on a worker; ``on_result(result)`` on success. With ``session``, the
-        result is dropped if another session was opened meanwhile."""
+               session=None, step: str | None = None) -> None:
+        """Run ``fn(*args)`` on a worker of the GUI's one job runner (:class:`Jobs`), one job at a
+        time; ``on_result(result)`` on success. ``step``: which of STEPS this job is (None: another
+        job such as saving). With ``session``, the result is dropped if another session was opened
+        meanwhile."""
         if self._worker is not None:
             return
         self.last_error = None
         self._job_session = session
+        self._job_name = title
+        self._job_step = step or title
+        self._on_result = on_result
         w = Worker(fn, *args, parent=self)
         self._worker = w
-        self._job_name = title
-        self._job_step = {"Detecting corners": "detect", "Calibrating": "calibrate",
-                          "Computing error tables": "tables"}.get(title, title)
-        self._on_result = on_result
-        w.progress.connect(self._on_progress)
-        w.finished.connect(self._on_finished)
-        w.failed.connect(self._on_failed)
-        w.cancelled.connect(self._on_cancelled)
-        w.done.connect(self._on_done)
         self.status.setText(f"{title}…")
         self.progress.setValue(0)
         self._set_busy(True)
-        w.start()
+        self.jobs.start(w, title, self._on_finished, on_failed=self._on_failed)
 
     @Slot(object, object, object)
     def _on_detection(self, session, det, thumb) -> None:

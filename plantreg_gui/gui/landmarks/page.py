@@ -35,6 +35,31 @@ from ..registration.image_views import ColourBar
 from ...models.layers import DEPTH, DisplaySettings, Layer, colour_bar_of, raw_layers
 from .point_view import Marker, PointView
 
+
+class ElideLeftCombo(QComboBox):
+    """A combo box that cuts a long entry at its start ("…/recordings/01grapevine"): recording
+    keys are paths, and their end names the plant; the whole key is the tooltip."""
+
+    def displayed_text(self) -> str:
+        from PySide6.QtWidgets import QStyle, QStyleOptionComboBox
+
+        opt = QStyleOptionComboBox()
+        self.initStyleOption(opt)
+        rect = self.style().subControlRect(QStyle.ComplexControl.CC_ComboBox, opt,
+                                           QStyle.SubControl.SC_ComboBoxEditField, self)
+        return self.fontMetrics().elidedText(self.currentText(), Qt.TextElideMode.ElideLeft, max(rect.width(), 20))
+
+    def paintEvent(self, _e) -> None:  # noqa: N802 (Qt name)
+        from PySide6.QtWidgets import QStyle, QStyleOptionComboBox, QStylePainter
+
+        p = QStylePainter(self)
+        opt = QStyleOptionComboBox()
+        self.initStyleOption(opt)
+        opt.currentText = self.displayed_text()
+        p.drawComplexControl(QStyle.ComplexControl.CC_ComboBox, opt)
+        p.drawControl(QStyle.ControlElement.CE_ComboBoxLabel, opt)
+
+
 #: keys of the nudge panel: key -> (kind, camera axis, sign). Rotations about the camera's own
 #: axes (x right, y down, z forward), translations along them -- as OpenCalib's manual panel.
 NUDGE_KEYS = {
@@ -107,8 +132,8 @@ class LandmarkPage(QWidget):
         self.open_button = QPushButton("Open…")
         self.open_button.setToolTip("open a rig and a landmarks file")
         self.open_button.clicked.connect(self._ask_open)
-        self.recording_combo = QComboBox()
-        self.recording_combo.setMinimumContentsLength(18)
+        self.recording_combo = ElideLeftCombo()
+        self.recording_combo.setMinimumContentsLength(11)  # cut at its start (ElideLeftCombo)
         self.recording_combo.currentTextChanged.connect(self._on_recording)
         self.camera_combo = QComboBox()
         self.camera_combo.currentTextChanged.connect(self._on_camera)
@@ -320,6 +345,9 @@ class LandmarkPage(QWidget):
         self.recording_combo.clear()
         self.recording_combo.addItems(s.recording_keys)
         self.recording_combo.setCurrentText(s.recording_key or "")
+        for i, k in enumerate(s.recording_keys):
+            self.recording_combo.setItemData(i, k, Qt.ItemDataRole.ToolTipRole)
+        self.recording_combo.setToolTip(s.recording_key or "")
         self.recording_combo.blockSignals(False)
         self.camera_combo.blockSignals(True)
         self.camera_combo.clear()
@@ -342,6 +370,7 @@ class LandmarkPage(QWidget):
             show_error(self, "Landmarks", str(e))
 
     def _on_recording(self, key: str) -> None:
+        self.recording_combo.setToolTip(key)
         if self.session is not None and key and key != self.session.recording_key:
             self._do(self.session.set_recording, key)
             self._show_images()

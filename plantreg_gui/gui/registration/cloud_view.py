@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
-    QCheckBox, QComboBox, QHBoxLayout, QLabel, QSpinBox, QSplitter, QVBoxLayout, QWidget,
+    QCheckBox, QComboBox, QHBoxLayout, QLabel, QSizePolicy, QSpinBox, QSplitter, QVBoxLayout, QWidget,
 )
 
 from ..plotter3d import Stages, first_frame_held, make_plotter, release_first_frame, repaint
@@ -55,6 +55,8 @@ class CloudView(QWidget):
             top.addWidget(cb)
         top.addStretch(1)
         self.hint = QLabel("Left-click a point to read all its values.")
+        self.hint.setMinimumWidth(10)  # cut on a narrow window, never widens it
+        self.hint.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         top.addWidget(self.hint)
 
         self.host = QWidget()
@@ -77,6 +79,11 @@ class CloudView(QWidget):
         lay = QVBoxLayout(self)
         lay.setContentsMargins(2, 2, 2, 2)
         lay.addLayout(top)
+        from .image_views import ColourBar
+
+        self.bar = ColourBar()  # the colouring layer's map and limits, as in the 2D views (hidden for RGB)
+        self.bar.setToolTip("colour map and limits of the layer that colours the points")
+        lay.addWidget(self.bar)
         lay.addWidget(split, 1)
         self.colour.currentIndexChanged.connect(self._recolour)
         self.point_size.valueChanged.connect(self._resize_points)
@@ -350,9 +357,18 @@ class CloudView(QWidget):
             note = f"Target {r.target}: object-mesh hits in the rig frame." if r is not None else ""
             self.set_cloud(session.cloud, session.meshes, default=session.colour_layer(), note=note)
 
+        def bar() -> None:
+            name = self.colour.currentText()
+            L = session.layer(name) or session.layer(name, registered=False)
+            if self.cloud is None or L is None:
+                self.bar.set_bar(None, None)
+            else:
+                self.bar.set_bar(*session.colour_bar(L))
+
         def display(name: str) -> None:
             if self.cloud is not None and self.colour.currentText() == name:
                 self._recolour()
+                bar()
 
         def cursor() -> None:  # the 2D cursor's object point, when the session moved it to one
             c = session.cursor
@@ -365,6 +381,8 @@ class CloudView(QWidget):
                 self.show_point(i)
 
         session.events.result.connect(refresh)
+        session.events.result.connect(bar)
+        self.colour.currentIndexChanged.connect(lambda _i: bar())
         session.events.display.connect(display)
         session.events.cursor.connect(cursor)
         return self

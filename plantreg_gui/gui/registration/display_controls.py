@@ -55,6 +55,59 @@ class BandSpinBox(QSpinBox):
         return QValidator.State.Intermediate if not text.strip() else QValidator.State.Acceptable, text, pos
 
 
+class Histogram(QWidget):
+    """The value histogram of the shown single-band layer with the colour limits marked (as
+    napari's and ImageJ's contrast dialogs): where the limits cut the data, at a glance.
+    ``counts`` (bins,), ``edges`` (bins + 1,) and ``limits`` (lo, hi) in the layer's unit."""
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.counts: np.ndarray | None = None
+        self.edges: np.ndarray | None = None
+        self.limits: tuple[float, float] | None = None
+        self.setFixedHeight(46)
+        self.setMinimumWidth(60)
+
+    def set_data(self, hist: tuple[np.ndarray, np.ndarray] | None, limits: tuple[float, float] | None,
+                 unit: str = "") -> None:
+        self.counts, self.edges = (None, None) if hist is None else hist
+        self.limits = limits
+        self.setVisible(hist is not None)
+        if hist is not None and limits is not None:
+            inside = float(self.counts[(self.edges[:-1] >= limits[0]) & (self.edges[1:] <= limits[1])].sum())
+            self.setToolTip(f"values {self.edges[0]:.4g}-{self.edges[-1]:.4g} {unit}; limits "
+                            f"{limits[0]:.4g}-{limits[1]:.4g} {unit} (red); "
+                            f"{100 * inside / max(float(self.counts.sum()), 1):.0f} % of the pixels between them")
+        self.update()
+
+    def x_of(self, v: float) -> float:
+        """Widget x of value ``v``."""
+        lo, hi = float(self.edges[0]), float(self.edges[-1])
+        return (v - lo) / (hi - lo if hi > lo else 1.0) * (self.width() - 1)
+
+    def paintEvent(self, _e) -> None:  # noqa: N802 (Qt name)
+        from PySide6.QtGui import QColor, QPainter
+
+        if self.counts is None:
+            return
+        p = QPainter(self)
+        w, h = self.width(), self.height()
+        p.fillRect(0, 0, w, h, QColor("#f4f4f4"))
+        c = np.log1p(self.counts.astype(np.float64))  # log: a dark background would flatten the rest
+        c = c / (c.max() or 1.0)
+        n = len(c)
+        p.setPen(QColor("#777"))
+        for i, v in enumerate(c):
+            x0, x1 = int(i * w / n), max(int((i + 1) * w / n) - 1, int(i * w / n))
+            p.fillRect(x0, int(h - v * (h - 2)), x1 - x0 + 1, int(v * (h - 2)), QColor("#8a8f98"))
+        if self.limits is not None:
+            p.setPen(QColor("#c00000"))
+            for v in self.limits:
+                x = int(round(min(max(self.x_of(v), 0), w - 1)))
+                p.drawLine(x, 0, x, h)
+        p.end()
+
+
 class DisplayControls(QGroupBox):
     """``changed(name, settings)`` after the user edits a modality's settings (throttled 80 ms)."""
 
@@ -107,8 +160,11 @@ class DisplayControls(QGroupBox):
         form.addRow("Limits", self.limit_mode)
         form.addRow("", lim)
         form.addRow("", self.lock)
+        self.histogram = Histogram()
+        form.addRow("", self.histogram)
         self.limits_note = QLabel("Lower limit must be below the upper; not applied.")
         self.limits_note.setStyleSheet("color: #a00000; font-size: 11px;")
+        self.limits_note.setWordWrap(True)  # wrapped, never cut ("…not ap") by the side panel's width
         self.limits_note.hide()
         form.addRow("", self.limits_note)
         form.addRow("Cube as", self.mode)
@@ -182,7 +238,19 @@ class DisplayControls(QGroupBox):
         unit = f", {L.unit}" if L.unit else ""
         kind = f"{L.bands} bands" if L.bands > 1 else f"single band, default map {default_cmap}"
         self.info.setText(f"{L.name}: {L.modality}{unit}, {kind}")
+        self._show_histogram(L, s)
         self._loading = False
+
+    def _show_histogram(self, L: Layer, s: DisplaySettings) -> None:
+        """The layer's histogram with the limits the rendering uses (absolute, else the percentiles')."""
+        hist = L.histogram() if L.bands == 1 else None
+        lim = None
+        if hist is not None:
+            try:
+                lim = s.limits if s.limits is not None else L.percentile_limits(s.percentiles)
+            except (ValueError, TypeError):
+                lim = None
+        self.histogram.set_data(hist, lim, L.unit)
 
     def _edited(self) -> None:
         if self._loading:
@@ -208,6 +276,7 @@ class DisplayControls(QGroupBox):
                              absolute and self.lock.isChecked())
         # the owner (the workspace's session) stores it when the throttled signal arrives
         self._pending = (name, st)
+        self._show_histogram(self.layers[name], st)
         self._timer.start()
 
     # ------------------------------------------------------------------ limits: percentiles or absolute

@@ -368,6 +368,11 @@ class ColourBar(QWidget):
             w.setStyleSheet("font-size: 11px;")
             lay.addWidget(w)
         lay.addStretch(1)
+        # the ramp shrinks with a narrow view (three bars side by side made the window too wide)
+        self.ramp.setScaledContents(True)
+        self.ramp.setMinimumWidth(40)
+        self.ramp.setMaximumWidth(160)
+        self.ramp.setSizePolicy(QSizePolicy.Policy.Preferred, QSizePolicy.Policy.Fixed)
         self.cmap: str | None = None
         self.limits: tuple[float, float] | None = None
         self.hide()
@@ -461,9 +466,11 @@ class SpectrumPlot(QWidget):
         self._timer.timeout.connect(self._draw)
         self.set_spectrum(None, None, "move the cursor over the hyperspectral image")
 
-    def set_spectrum(self, values: np.ndarray | None, wavelengths: np.ndarray | None, title: str) -> None:
+    def set_spectrum(self, values: np.ndarray | None, wavelengths: np.ndarray | None, title: str,
+                     unit: str = "") -> None:
+        """``unit`` of the values (the camera's, e.g. reflectance): the value axis's label."""
         self.current = values
-        self._pending = (values, wavelengths, title)
+        self._pending = (values, wavelengths, title, unit)
         if not self._timer.isActive():
             self._timer.start()
 
@@ -471,12 +478,11 @@ class SpectrumPlot(QWidget):
         """Update the one line in place (clearing and re-plotting the axes costs far more)."""
         if self._pending is None:
             return
-        values, wl, title = self._pending
+        values, wl, title, unit = self._pending
         self._pending = None
         ax = self.ax
         if self._line is None:
             ax.tick_params(labelsize=7)
-            ax.set_ylabel("value", fontsize=7)
             (self._line,) = ax.plot([], [], color="#2a7f2a", lw=1.2)
             self._note = ax.text(0.5, 0.5, "", transform=ax.transAxes, ha="center", va="center", fontsize=8,
                                  color="#555")
@@ -493,6 +499,7 @@ class SpectrumPlot(QWidget):
             x = wl if wl is not None else np.arange(values.size)
             self._line.set_data(x, values)
             ax.set_xlabel("wavelength (nm)" if wl is not None else "band", fontsize=7)
+            ax.set_ylabel(unit or "value", fontsize=7)
             ax.relim()
             ax.autoscale_view()
         self.canvas.draw_idle()

@@ -53,6 +53,9 @@ class MosaicView(QWidget):
         self._flick_timer.timeout.connect(self._flick)
         self._flick_state = 0
 
+        for c in (self.mode, self.a, self.b):  # narrow windows: the combos give way, not the window
+            c.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+            c.setMinimumContentsLength(4)
         top = QHBoxLayout()
         top.addWidget(QLabel("Mode"))
         top.addWidget(self.mode)

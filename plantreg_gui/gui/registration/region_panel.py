@@ -122,11 +122,12 @@ class RegionPanel(QGroupBox):
         cases = "  ".join(f"{k} {n:,} ({p:.1f}%)" for k, (n, p) in st.cases.items() if n)
         lines = [f"<b>{st.source}</b> over {st.pixels:,} px", cases,
                  f"P1 not mixed: {st.trusted:,} px" + (f" ({st.mixed:,} mixed left out)" if st.mixed else "")]
-        mod = s.layer(st.source).modality if s.layer(st.source) is not None else ""
+        L = s.layer(st.source)
+        mod, unit = (L.modality, L.unit) if L is not None else ("", None)
         if st.bands == 1:
             if np.isfinite(st.mean[0]):
-                lines.append(f"mean <b>{format_value(st.mean[0], mod)}</b>, median {format_value(st.median[0], mod)}, "
-                             f"std {format_value(st.std[0], mod)}")
+                lines.append(f"mean <b>{format_value(st.mean[0], mod, unit)}</b>, "
+                             f"median {format_value(st.median[0], mod, unit)}, std {format_value(st.std[0], mod, unit)}")
             else:
                 lines.append("no P1 value in the region")
             self.spectrum.hide()

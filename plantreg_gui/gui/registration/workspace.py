@@ -30,8 +30,8 @@ from ...core.errors import InputError, PlantregError
 from ...core.data.recording import MANIFEST
 from ...core.camera.rig import Rig
 from ...models.layers import DisplaySettings
-from ...models.registration import (RegistrationSession, check_is_rig_file, demo_job, kind_of_path, load_job,
-                                   plant3d_job, register_job)
+from ...models.registration import (RegistrationSession, check_is_rig_file, demo_job, fit_problem, kind_of_path,
+                                   load_job, plant3d_job, recording_for_plant, register_job, rig_beside)
 from ..workers import Jobs, Worker, show_error
 from .display_controls import DisplayControls
 from .export_dialog import ExportDialog, folder_is_nonempty
@@ -133,13 +133,18 @@ class RegistrationWorkspace(QWidget):
         self.file_menu.addAction("Open recording…", lambda: self._guard(self._ask_recording))
         self.file_menu.addAction("Open Plant3DImageReg recording…", lambda: self._guard(self._ask_plant3d))
         self.recent_menu = self.file_menu.addMenu("Open recent")
+        self.close_action = self.file_menu.addAction("Close", self.close_sources)
+        self.close_action.setToolTip("close the rig, the recording and the result (to open another pair)")
         self.recent_menu.aboutToShow.connect(self._fill_recent)
         self.file_menu.addAction("Fit rig from landmarks…", lambda: self.landmarks_requested.emit(
             self.rig_path, getattr(self.recording, "folder", None)))
         self.file_menu.addSeparator()
         self.file_menu.addAction("Load demo", lambda: self._guard(self.load_demo))
-        self.export_action = self.file_menu.addAction("Export…", self._ask_export)
+        self.export_action = self.file_menu.addAction("Export…", lambda: self._guard(self._ask_export,
+                                                                                      title="Cannot export"))
         self.export_action.setEnabled(False)
+        self.file_menu.addAction("Save region…", lambda: self._guard(self._ask_save_region, title="Cannot save"))
+        self.file_menu.addAction("Load region…", lambda: self._guard(self._ask_load_region))
         self.save_view_action = self.file_menu.addAction("Save view as PNG…",
                                                          lambda: self._guard(self._ask_save_view, title="Cannot save"))
         self.save_view_action.setShortcut(QKeySequence("Ctrl+Shift+S"))
@@ -165,7 +170,7 @@ class RegistrationWorkspace(QWidget):
         tb.addSeparator()
         self.export_button = QPushButton("Export…")
         self.export_button.setEnabled(False)
-        self.export_button.clicked.connect(self._ask_export)
+        self.export_button.clicked.connect(lambda: self._guard(self._ask_export, title="Cannot export"))
         tb.addWidget(self.export_button)
         tb.addSeparator()
         self.source_label = QLabel("Open a rig and a recording, drop a folder here, or File ▸ Load demo.")
@@ -214,7 +219,7 @@ class RegistrationWorkspace(QWidget):
         sl.addWidget(self.summary, 1)
         self.spectrum.hide()  # shown once a multi-band image is open (an empty plot says nothing)
         self.spectrum_label.hide()
-        side.setMinimumWidth(290)
+        side.setMinimumWidth(270)
         # the side panel scrolls when its groups are taller than the window (a region's spectrum
         # below the cursor's): its content never makes the window taller than the screen
         self.side_scroll = QScrollArea()
@@ -222,7 +227,7 @@ class RegistrationWorkspace(QWidget):
         self.side_scroll.setWidgetResizable(True)
         self.side_scroll.setFrameShape(QFrame.Shape.NoFrame)
         self.side_scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        self.side_scroll.setMinimumWidth(300)
+        self.side_scroll.setMinimumWidth(280)
         self.side_scroll.setMaximumWidth(375)
 
         split = QSplitter(Qt.Orientation.Horizontal)
@@ -372,18 +377,47 @@ class RegistrationWorkspace(QWidget):
         self._start(Worker(demo_job, folder, self._job_settings()), "Preparing the demo",
                     self._loaded)
 
+    def close_sources(self) -> None:
+        """File ▸ Close: stop the jobs and forget rig, recording (or plant) and result."""
+        self.cancel()
+        self.session.close()
+        self.readout.setText("")
+
+    def _confirm(self, title: str, text: str) -> bool:
+        return QMessageBox.question(self, title, text, QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No,
+                                    QMessageBox.StandardButton.No) == QMessageBox.StandardButton.Yes
+
     def open_rig(self, path: str | Path) -> None:
-        """Read a rig file (raises :class:`InputError` naming the file if it is bad)."""
+        """Read a rig file (raises :class:`InputError` naming the file if it is bad). A shown
+        Plant3DImageReg plant is reopened through the recording that ships with the rig (see
+        :func:`recording_for_plant`); an open recording that does not fit the rig is closed
+        when the user agrees."""
         path = Path(path)
         if path.is_dir():
             raise InputError("is a folder, not a rig file: choose the rig's .json file", path)
         check_is_rig_file(path)
         rig = Rig.load(path)
-        if self.session.plant is not None:
-            # a plant of the data set has no rig of its own: the rig goes with a recording opened next
-            self.session.apply_loaded({"rig": None, "recording": None, "recording_path": None, "layers": [],
-                                       "renders": {}})
-        self.session.set_rig(rig, path)
+        s = self.session
+        if s.plant is not None:
+            rec = recording_for_plant(path, s.plant.plant)
+            plant = s.plant.plant
+            s.close()  # a plant of the data set has no rig of its own
+            if rec is not None:
+                self._add_recent("rig", str(path))
+                self._start(Worker(load_job, path, rec, None, self._job_settings()), f"Reading {plant}",
+                            self._loaded)
+                return
+            self.readout.setText(f"{plant} closed: the rig has no recording of it (recordings/{plant} "
+                                 "beside the rig); open its recording folder.")
+        elif s.recording is not None:
+            why = fit_problem(rig, s.recording)
+            if why is not None:
+                if not self._confirm("Close the recording?",
+                                     f"The open recording {s.recording_path} does not fit this rig:\n{why}\n\n"
+                                     "Close the recording and open the rig?"):
+                    return
+                s.close()
+        s.set_rig(rig, path)
         self._add_recent("rig", str(path))
 
     def open_recording(self, path: str | Path) -> None:
@@ -397,12 +431,7 @@ class RegistrationWorkspace(QWidget):
         if not (path / MANIFEST).is_file() and plant3d.is_dataset(path.parent):  # DATASET/<plant>
             self.open_plant3d(path.parent, path.name)
             return
-        rig_path = None
-        if self.session.rig is None:
-            for cand in (path / "rig.json", path.parent / "rig.json"):
-                if cand.is_file():
-                    rig_path = cand
-                    break
+        rig_path = rig_beside(path) if self.session.rig is None else None
         self._start(Worker(load_job, rig_path, path, self.session.rig, self._job_settings()),
                     "Reading the recording", self._loaded)
 
@@ -411,18 +440,37 @@ class RegistrationWorkspace(QWidget):
         folder = Path(folder)
         if plant not in plant3d.list_plants(folder):
             raise InputError(f"no plant '{plant}' in the data set", folder)
+        rec = recording_for_plant(self.session.rig_path, plant)
+        if rec is not None:  # the open rig ships a recording of this plant: that one registers
+            self.open_recording(rec)
+            return
         self._start(Worker(plant3d_job, folder, plant, self._job_settings()),
                     f"Reading {plant}", self._plant_loaded)
 
     def _loaded(self, out: dict) -> None:
-        self.session.apply_loaded(out)
+        s = self.session
+        if out.get("misfit"):
+            old = s.rig_path.name if s.rig_path is not None else "the open rig"
+            if not self._confirm("Close the rig?",
+                                 f"The recording {out['recording_path']} does not fit {old}:\n{out['misfit']}\n\n"
+                                 "Close the rig and show the recording's raw images?"):
+                return
+        s.apply_loaded(out)
+        if out.get("replaced_rig"):
+            self.readout.setText(f"Opened with its own rig {out['rig_path']} (the open rig did not fit: "
+                                 f"{out['replaced_rig']})")
         if not out.get("demo"):  # the demo lives in a temporary folder: not worth remembering
-            if out["rig_path"] is not None:
-                self._add_recent("rig", str(out["rig_path"]))
-            self._add_recent("recording", str(out["recording_path"]))
+            if s.rig_path is not None:
+                self._add_recent("pair", f"{s.rig_path}|{out['recording_path']}")
+            else:
+                self._add_recent("recording", str(out["recording_path"]))
 
     def _plant_loaded(self, out: dict) -> None:
+        old_rig = self.session.rig_path
         self.session.apply_plant(out)
+        if old_rig is not None:  # said, not silent: the plant has no recording for this rig
+            self.readout.setText(f"Rig {old_rig.name} closed: it ships no recording of {out['plant'].plant} "
+                                 "(recordings/<plant> beside the rig file).")
         p = out["plant"]
         self._add_recent("plant3d", f"{p.folder}|{p.plant}")
         if not self._view_chosen:
@@ -467,6 +515,8 @@ class RegistrationWorkspace(QWidget):
     def cancel(self) -> None:
         self.session.pending_target = None
         self._workers.cancel_all()
+        if self.session.result is not None:  # the toolbar names the target of what is shown
+            self.target_combo.setCurrentText(self.session.result.target)
 
     # ------------------------------------------------------------------ export
     def _ask_export(self) -> None:
@@ -493,6 +543,12 @@ class RegistrationWorkspace(QWidget):
             show_error(self, "Nothing to export", "Register the recording first.")
             return False
         out = Path(out)
+        from ...core.export.export import check_output_spares_inputs
+
+        keep = [p for p in (s.rig_path, s.recording_path) if p is not None]
+        if s.recording is not None:
+            keep += [Path(p) for p in s.recording.paths.values()]
+        check_output_spares_inputs(out, keep)  # refused before "Replace it?", not after Yes
         if folder_is_nonempty(out) and not overwrite:
             ans = QMessageBox.question(self, "Replace folder?",
                                        f"{out} exists and is not empty.\nReplace it with this export?",
@@ -634,12 +690,29 @@ class RegistrationWorkspace(QWidget):
         self.recent_menu.clear()
         for e in self.recent():
             kind, _, path = e.partition(":")
-            self.recent_menu.addAction(f"{kind}: {path}", lambda k=kind, p=path: self._guard(self._open_recent, k, p))
+            if kind == "pair":
+                rig, _, rec = path.partition("|")
+                label = f"{Path(rig).parent.name}/{Path(rig).name} + {Path(rec).parent.name}/{Path(rec).name}"
+            else:
+                label = f"{kind}: {path}"
+            act = self.recent_menu.addAction(label, lambda k=kind, p=path: self._guard(self._open_recent, k, p))
+            act.setToolTip(path.replace("|", " + "))
         if self.recent_menu.isEmpty():
             self.recent_menu.addAction("(none)").setEnabled(False)
 
+    def open_pair(self, rig_path: str | Path, recording: str | Path) -> None:
+        """Close what is open and read a rig and a recording together (File ▸ Open recent)."""
+        rig_path, recording = Path(rig_path), Path(recording)
+        check_is_rig_file(rig_path)
+        self.close_sources()
+        self._start(Worker(load_job, rig_path, recording, None, self._job_settings()), "Reading the recording",
+                    self._loaded)
+
     def _open_recent(self, kind: str, path: str) -> None:
-        if kind == "rig":
+        if kind == "pair":
+            rig, _, rec = path.partition("|")
+            self.open_pair(rig, rec)
+        elif kind == "rig":
             self.open_rig(path)
         elif kind == "recording":
             self.open_recording(path)
@@ -669,9 +742,7 @@ class RegistrationWorkspace(QWidget):
         elif kind == "recording":
             self.open_recording(p)
         else:  # a demo folder: rig.json + recording/
-            self.session.rig = None
-            self.open_rig(p / "rig.json")
-            self.open_recording(p / "recording")
+            self.open_pair(p / "rig.json", p / "recording")
 
     # ------------------------------------------------------------------ interaction
     def _tab_changed(self, _i: int) -> None:
@@ -712,10 +783,55 @@ class RegistrationWorkspace(QWidget):
     def _run_region_stats(self, job: tuple, token: int) -> None:
         stale = self._stats_worker  # a new region or source: the statistics still running are stale
         if stale is not None and stale in self._workers:
-            stale.cancel()
+            stale.supersede()  # not "cancelled" in the status bar: its successor is running
         w = self._stats_worker = Worker(*job)
         self._start(w, "Region statistics", lambda out: self.session.apply_region_stats(out[0], token),
                     kind="region")
+
+    def save_region(self, path: str | Path) -> Path:
+        """Write the drawn region (shape, target camera and size) as JSON; raises without one."""
+        from ...core.io.imageio import atomic_write_text
+        from ...models.registration import region_to_json
+
+        s = self.session
+        if s.region is None or s.result is None:
+            raise InputError("draw a region on the registered images first")
+        path = Path(path)
+        try:
+            atomic_write_text(path, region_to_json(s.region, s.result.target, s.result.shape))
+        except OSError as e:
+            raise InputError(f"cannot write the region ({e.strerror or e})", path) from None
+        self.readout.setText(f"Saved the region to {path}")
+        return path
+
+    def load_region(self, path: str | Path) -> None:
+        """Draw the region saved in ``path`` again (same target camera and size), with its statistics."""
+        from ...models.registration import region_from_json
+
+        s = self.session
+        path = Path(path)
+        if s.result is None:
+            raise InputError("register first: a region is drawn on the registered images", path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            raise InputError(f"cannot read the region file ({getattr(e, 'strerror', None) or e})", path) from None
+        s.set_region(*region_from_json(text, s.result.target, s.result.shape, path))
+        self.set_view("side-by-side")
+
+    def _region_dialog_start(self) -> str:
+        rec = self.session.recording_path
+        return str((rec.parent if rec is not None and not self.session.is_demo else Path.home()) / "region.json")
+
+    def _ask_save_region(self) -> None:
+        p, _ = QFileDialog.getSaveFileName(self, "Save region", self._region_dialog_start(), "Region (*.json)")
+        if p:
+            self.save_region(p if p.lower().endswith(".json") else p + ".json")
+
+    def _ask_load_region(self) -> None:
+        p, _ = QFileDialog.getOpenFileName(self, "Load region", self._region_dialog_start(), "Region (*.json)")
+        if p:
+            self.load_region(p)
 
     def _ask_region_csv(self) -> None:
         job = self.session.region_csv_job()  # raises (shown) without a region

@@ -1,0 +1,373 @@
+"""Issue 21's workspace defects, driven as the technician drove them (under Xvfb): switching
+between rig/recording pairs, the data set's plants opened through their own folders, File ▸ Close
+and the recent pairs. Each test failed on the code before the fix."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.gui
+
+ROOT = Path(__file__).resolve().parents[1]
+P3D = ROOT / "resources" / "plant3dimagereg"
+
+
+def _wait(pred, timeout: float = 120.0) -> None:
+    from test_gui_workspace import _wait as wait  # the event-loop wait of the workspace tests
+
+    wait(None, pred, timeout)
+
+
+def _answer(monkeypatch, yes: bool) -> list:
+    from PySide6.QtWidgets import QMessageBox
+
+    asked = []
+    ans = QMessageBox.StandardButton.Yes if yes else QMessageBox.StandardButton.No
+    monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: asked.append(a[2]) or ans)
+    return asked
+
+
+def test_open_another_rig_offers_to_close_the_recording(registered_workspace, monkeypatch, shared_data):
+    """Defect 1: demo registered, then Open rig of the real plants: was refused naming the old
+    recording's image; now the user is asked, and Yes gives the new rig alone."""
+    ws = registered_workspace
+    asked = _answer(monkeypatch, False)
+    ws.open_rig(P3D / "rig.json")
+    assert len(asked) == 1 and "does not fit this rig" in asked[0]
+    assert ws.rig_path != P3D / "rig.json" and ws.result is not None  # "No" keeps everything
+    asked = _answer(monkeypatch, True)
+    ws.open_rig(P3D / "rig.json")
+    assert ws.rig_path == P3D / "rig.json" and ws.recording is None and ws.result is None
+    assert set(ws.rig.names) == {"ir", "thermal", "hyperspectral"}
+
+
+def test_recording_that_does_not_fit_the_rig_offers_to_close_it(registered_workspace, monkeypatch, shared_data):
+    """Defect 1, the other order: the plant recording opened with the demo rig open."""
+    ws = registered_workspace
+    asked = _answer(monkeypatch, True)
+    ws.open_recording(P3D / "recordings" / "01grapevine")
+    _wait(lambda: not ws.is_busy())
+    assert len(asked) == 1 and "does not fit" in asked[0]
+    assert ws.rig is None and ws.recording_path == P3D / "recordings" / "01grapevine"
+    assert set(ws.raw_grid.views) == {"depth", "ir", "thermal", "hyperspectral"}
+    ws.open_rig(P3D / "rig.json")  # and now the right rig: registrable
+    assert ws.register_button.isEnabled() and ws.session.can_register()
+
+
+def test_dataset_plant_folder_with_the_shipped_rig_registers(workspace, shared_data):
+    """Defect 2: rig open, then the data set's own plant folder: the rig was dropped silently;
+    now the recording shipped beside the rig is opened, and Register is enabled."""
+    ws = workspace
+    ws.open_rig(P3D / "rig.json")
+    ws.open_recording(shared_data / "plant3dimagereg" / "01grapevine")
+    _wait(lambda: not ws.is_busy())
+    assert ws.rig_path == P3D / "rig.json" and ws.plant is None
+    assert ws.recording_path == P3D / "recordings" / "01grapevine"
+    assert ws.register_button.isEnabled()
+
+
+def test_plant_shown_then_rig_opens_its_recording(workspace, shared_data):
+    """Defect 2, plant first: Open rig used to drop the plant and leave Register disabled."""
+    ws = workspace
+    ws.open_plant3d(shared_data / "plant3dimagereg", "04philodendron")
+    _wait(lambda: not ws.is_busy())
+    assert ws.plant is not None and not ws.register_button.isEnabled()
+    ws.open_rig(P3D / "rig.json")
+    _wait(lambda: not ws.is_busy())
+    assert ws.plant is None and ws.recording_path == P3D / "recordings" / "04philodendron"
+    assert ws.rig_path == P3D / "rig.json" and ws.register_button.isEnabled()
+
+
+def test_file_close_and_recent_pair(registered_workspace, demo_dir):
+    """File ▸ Close forgets rig, recording and result; Open recent reopens the pair together."""
+    ws = registered_workspace
+    ws._add_recent("pair", f"{demo_dir / 'rig.json'}|{demo_dir / 'recording'}")
+    assert "Close" in [a.text() for a in ws.file_menu.actions()]
+    ws.close_action.trigger()
+    assert ws.rig is None and ws.recording is None and ws.result is None and not ws.raw
+    assert not ws.register_button.isEnabled() and not ws.export_button.isEnabled()
+    assert not ws.empty_notes["raw"].isHidden()
+    ws._fill_recent()
+    pair = [a for a in ws.recent_menu.actions() if "+" in a.text()]
+    assert pair and "demo/rig.json + demo/recording" in pair[0].text()
+    pair[0].trigger()
+    _wait(lambda: not ws.is_busy())
+    assert ws.rig_path == demo_dir / "rig.json" and ws.recording_path == demo_dir / "recording"
+    assert ws.register_button.isEnabled()
+
+
+def test_cancel_leaves_the_toolbar_on_the_shown_target(registered_workspace):
+    """Defect 6: after Cancel the Target box named the cancelled camera over the old result."""
+    ws = registered_workspace
+    assert ws.result.target == "ir"
+    ws.session.registrar = None  # rebuild the meshes: long enough to cancel
+    ws.run_registration("rgb")
+    assert ws.target_combo.currentText() == "rgb" and ws.is_busy()
+    ws.cancel()
+    _wait(lambda: not ws.is_busy())
+    assert ws.result.target == "ir" and ws.target_combo.currentText() == "ir"
+
+
+def test_export_into_the_recording_is_refused_before_asking(registered_workspace, monkeypatch, demo_dir):
+    """Defect 7: "exists and is not empty. Replace it?" came first, the refusal only after Yes."""
+    from plantreg_gui.core.errors import InputError
+
+    ws = registered_workspace
+    asked = _answer(monkeypatch, False)
+    with pytest.raises(InputError, match="would replace an input"):
+        ws.export(demo_dir / "recording")
+    assert not asked and not ws.is_busy()
+
+
+def test_redrawn_region_does_not_report_cancelled(registered_workspace):
+    """Defect 8: a region redrawn while the first one's statistics ran left "Region statistics:
+    cancelled." under the valid statistics."""
+    ws = registered_workspace
+    s = ws.session
+    s.set_region("rect", (100.0, 100.0, 400.0, 400.0))
+    s.set_region("rect", (200.0, 150.0, 420.0, 380.0))
+    _wait(lambda: not ws.is_busy())
+    assert s.region_stats is not None and "cancelled" not in ws.readout.text()
+
+
+def test_wrong_files_opened_as_a_rig_are_named_for_what_they_are(workspace, demo_dir, tmp_path):
+    """Defect 9: a session.json was "the rig has no cameras", a PNG "not UTF-8 text (invalid start
+    byte...)", an empty JSON "Expecting value"."""
+    import json
+
+    from plantreg_gui.core.errors import InputError
+    from plantreg_gui.core.io.imageio import write_png
+
+    import numpy as np
+
+    png = tmp_path / "board.png"
+    write_png(png, np.zeros((8, 8, 3), np.uint8))
+    (tmp_path / "empty.json").write_text("")
+    (tmp_path / "broken.json").write_text('{"cameras": [')
+    lm = tmp_path / "landmarks.json"
+    lm.write_text(json.dumps({"format": "plantreg.landmarks", "version": 1, "recordings": {}}))
+    cases = {demo_dir / "calibration" / "session.json": "calibration session",
+             png: "PNG image", tmp_path / "empty.json": "empty", tmp_path / "broken.json": "not valid JSON",
+             lm: "landmarks file"}
+    for path, what in cases.items():
+        with pytest.raises(InputError) as e:
+            workspace.open_rig(path)
+        msg = str(e.value)
+        assert msg.startswith(str(path)) and "not a rig file" in msg and what in msg, msg
+        assert "UTF-8" not in msg and "no cameras" not in msg
+        assert "Expecting value" not in msg or path.name == "broken.json"
+    assert workspace.rig is None
+
+
+def test_units_come_from_the_rig(workspace, demo_registered):
+    """Defect 4: a camera's ``units`` in the rig were ignored (a thermal camera in kelvin was
+    labelled °C; the infrared's DN and the cube's reflectance appeared nowhere): read-out, colour
+    bar, spectrum axis, region statistics and the point read-out follow the rig."""
+    import numpy as np
+
+    from conftest import workspace_session_outputs
+    from plantreg_gui.models.layers import registered_layers
+
+    loaded, reg = workspace_session_outputs(demo_registered)
+    rig = loaded["rig"]
+    assert rig.camera("ir").extra["units"] == "DN" and rig.camera("hyperspectral").extra["units"] == "reflectance"
+    s = workspace.session
+    s.apply_loaded(loaded)
+    workspace._registered(reg)
+    s.hover("target", 240, 330)
+    assert " DN" in s.readout.split("ir: ")[1].split("   ")[0]
+    assert "reflectance @" in s.readout and s.spectrum[3] == "reflectance"
+    th = s.layer("thermal")
+    assert th.unit == "°C" and s.colour_bar(th)[2] == "°C"
+    from plantreg_gui.models.layers import Layer
+    import numpy as np
+
+    rgb8 = Layer("hs", "hyperspectral", np.full((2, 2, 3), 7, np.uint8), None, "8-bit render")
+    assert rgb8.value_text(0, 0) == "(7, 7, 7) 8-bit render"  # a 3-band image: the unit said once
+    # the same camera stated in kelvin: K everywhere, never °C
+    kelvin = rig.camera("thermal")
+    old = dict(kelvin.extra)
+    try:
+        kelvin.extra["units"] = "K"
+        L = next(L for L in registered_layers(reg["result"], rig) if L.name == "thermal")
+        assert L.unit == "K" and L.value_text(240, 330).endswith(" K")
+        assert "°C" not in L.value_text(240, 330)
+    finally:
+        kelvin.extra.clear()
+        kelvin.extra.update(old)
+    s.set_masks_source("thermal")
+    s.set_region("rect", (250.0, 200.0, 400.0, 300.0))
+    from PySide6.QtWidgets import QApplication
+    _wait(lambda: s.region_stats is not None)
+    assert s.region_stats.unit == "°C"
+    assert "°C" in workspace.region_panel.text.text()
+    assert np.isfinite(s.region_stats.mean[0])
+
+
+def test_landmark_page_loo_median_and_recording_names(qtbot, shared_data, tmp_path):
+    """Defect 11: "LOO median" was "-" for every camera with three annotated recordings (the page
+    fitted without leave-one-out; the CLI prints it), and an added recording showed as its
+    absolute path cut after ~25 characters, so the plant could not be told."""
+    import re
+
+    from plantreg_gui.gui.landmarks.page import LandmarkPage
+    from plantreg_gui.models.landmarks import LandmarkSession
+
+    s = LandmarkSession.load(P3D / "rig.json", P3D / "landmarks.json")
+    assert len(s.recording_keys) == 3
+    p = LandmarkPage()
+    qtbot.addWidget(p)
+    p.resize(1280, 700)
+    p.show()
+    p.set_session(s)
+    qtbot.waitUntil(lambda: not p.is_busy(), timeout=300_000)
+    with qtbot.waitSignal(p.fit_done, timeout=120_000):
+        p.fit_button.click()
+    qtbot.waitUntil(lambda: not p.is_busy(), timeout=300_000)
+    row = next(ln for ln in p.report_text.toPlainText().splitlines() if ln.strip().startswith("hyperspectral"))
+    assert re.search(r"\d+\.\d\d\s*$", row), row  # the LOO median, a number
+    s = LandmarkSession.open(P3D / "rig.json", tmp_path / "new_landmarks.json")  # a new file elsewhere
+    s.add_recording(P3D / "recordings" / "01grapevine")
+    key = s.add_recording(P3D / "recordings" / "04philodendron")  # outside the file's folder: absolute
+    p.set_session(s)
+    qtbot.waitUntil(lambda: not p.is_busy(), timeout=300_000)
+    p.recording_combo.setCurrentText(key)
+    assert Path(key).is_absolute() and len(key) > 40
+    assert p.recording_combo.displayed_text().endswith("04philodendron")
+    assert p.recording_combo.toolTip() == key
+    p.shutdown()
+
+
+def test_main_window_fits_half_a_1920_screen_and_a_laptop(qapp, demo_registered):
+    """Defect 12: the minimum size was 1233 x 707 (later 1246 x 632): it fitted neither half of a
+    1920 px screen nor a 1280 x 720 laptop. Measured with a registration shown (long labels,
+    summary, colour bars) on every tab."""
+    from conftest import workspace_session_outputs
+    from plantreg_gui.gui.main_window import MainWindow
+
+    w = MainWindow()
+    w.resize(900, 500)
+    w.show()
+    try:
+        loaded, reg = workspace_session_outputs(demo_registered)
+        w.workspace.session.apply_loaded(loaded)
+        w.workspace._registered(reg)
+        for i in range(w.tabs.count()):
+            w.tabs.setCurrentIndex(i)
+            for key in w.workspace.views:
+                w.workspace.set_view(key)
+                qapp.processEvents()
+                m = w.minimumSizeHint()
+                assert m.width() <= 950 and m.height() <= 640, (w.tabs.tabText(i), key, m.toTuple())
+        w.resize(950, 640)
+        qapp.processEvents()
+        assert w.width() <= 950 and w.height() <= 640
+    finally:
+        w.close()
+        w.deleteLater()
+
+
+def test_texts_are_not_cut(qtbot, qapp):
+    """Defect 10: the inverted-limits note was cut ("...not ap"); page 1's headers ("lame (= file
+    name") and modality cells ("ıyperspectral") were cut."""
+    from plantreg_gui.gui.calibration.wizard import CalibrationWizard
+    from plantreg_gui.gui.registration.display_controls import DisplayControls
+
+    dc = DisplayControls()
+    qtbot.addWidget(dc)
+    dc.setFixedWidth(290)
+    dc.show()
+    dc.limits_note.show()
+    dc.adjustSize()
+    for _ in range(3):
+        qapp.processEvents()
+    note = dc.limits_note
+    assert note.wordWrap() and note.heightForWidth(note.width()) <= note.height() + 1
+
+    wz = CalibrationWizard()
+    qtbot.addWidget(wz)
+    wz.resize(950, 640)
+    wz.show()
+    page = wz.pages[0]
+    page._add_camera("hyperspectral", "hyperspectral", "reflectance", "400-1000/100")
+    qapp.processEvents()
+    t = page.cameras
+    fm = t.horizontalHeader().fontMetrics()
+    for col in range(t.columnCount() - 1):  # the last column stretches
+        text = t.horizontalHeaderItem(col).text()
+        assert t.columnWidth(col) >= fm.horizontalAdvance(text), text
+    combo = t.cellWidget(t.rowCount() - 1, 1)
+    assert t.columnWidth(1) >= combo.sizeHint().width()
+    wz.shutdown() if hasattr(wz, "shutdown") else None
+
+
+def test_histogram_beside_the_limits_and_3d_colour_bar(registered_workspace, qapp):
+    """New tools: a histogram of the shown layer with its colour limits marked, and the 3D view's
+    colour bar for the layer that colours the points (both absent before)."""
+    import numpy as np
+
+    from plantreg_gui.models.layers import DisplaySettings
+
+    ws = registered_workspace
+    s = ws.session
+    th = s.layer("thermal")
+    ws.controls.layer.setCurrentText("thermal")
+    qapp.processEvents()
+    h = ws.controls.histogram
+    assert not h.isHidden()
+    v = th.data[np.isfinite(th.data)]
+    want_counts, want_edges = np.histogram(v.astype(np.float64), bins=len(h.counts))
+    np.testing.assert_array_equal(h.counts, want_counts)
+    np.testing.assert_allclose(h.edges, want_edges)
+    assert h.limits == pytest.approx(s.colour_bar(th)[1])
+    ws.controls.apply("thermal", DisplaySettings(None, (1.0, 99.0), None, (21.0, 23.0)))
+    ws.controls._show_layer()
+    assert h.limits == (21.0, 23.0) and "limits 21-23 °C" in h.toolTip()
+    ws.controls.layer.setCurrentText("rgb")  # a colour image has no single-value histogram
+    assert h.isHidden()
+
+    cv = ws.cloud_view
+    cv.colour.setCurrentText("thermal")
+    qapp.processEvents()
+    assert not cv.bar.isHidden()
+    cmap, lim, unit = s.colour_bar(s.layer("thermal"))
+    assert cv.bar.cmap == cmap and cv.bar.limits == pytest.approx(lim) and unit == "°C"
+    assert cv.bar.hi.text().endswith("°C")
+    s.set_display("thermal", DisplaySettings(None, (1.0, 99.0), None, (20.0, 24.0)))
+    assert cv.bar.limits == (20.0, 24.0)
+    cv.colour.setCurrentText("rgb")
+    assert cv.bar.isHidden()
+
+
+def test_region_shapes_saved_and_loaded(registered_workspace, tmp_path):
+    """New tool: a region drawn on the registered images is saved (shape, target camera and size)
+    and loaded again with the same statistics; a region drawn on another target is refused."""
+    import json
+
+    from plantreg_gui.core.errors import InputError
+
+    ws = registered_workspace
+    s = ws.session
+    poly = [(210.5, 150.0), (420.0, 170.25), (400.0, 380.0), (230.0, 360.0)]
+    s.set_region("polygon", poly)
+    _wait(lambda: s.region_stats is not None and not ws.is_busy())
+    pixels = s.region_stats.pixels
+    p = ws.save_region(tmp_path / "leaf.json")
+    d = json.loads(p.read_text())
+    assert d["format"] == "plantreg.region" and d["target"] == "ir" and d["target_size"] == [640, 576]
+    s.set_region(None)
+    assert s.region is None
+    ws.load_region(p)
+    assert s.region == ("polygon", poly)
+    _wait(lambda: s.region_stats is not None and not ws.is_busy())
+    assert s.region_stats.pixels == pixels
+    view = ws.sbs_grid.views["ir"].view
+    assert view._region.isVisible()
+    d["target"] = "thermal"
+    (tmp_path / "other.json").write_text(json.dumps(d))
+    with pytest.raises(InputError, match="drawn on thermal"):
+        ws.load_region(tmp_path / "other.json")
+    with pytest.raises(InputError, match="not a region file"):
+        ws.load_region(P3D / "rig.json")
