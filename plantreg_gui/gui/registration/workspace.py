@@ -543,12 +543,13 @@ class RegistrationWorkspace(QWidget):
             show_error(self, "Nothing to export", "Register the recording first.")
             return False
         out = Path(out)
-        from ...core.export.export import check_output_spares_inputs
+        from ...core.io.paths import check_output_location
 
         keep = [p for p in (s.rig_path, s.recording_path) if p is not None]
         if s.recording is not None:
             keep += [Path(p) for p in s.recording.paths.values()]
-        check_output_spares_inputs(out, keep)  # refused before "Replace it?", not after Yes
+        # the one output check, before "Replace it?" rather than after Yes (the dialog asks about a non-empty folder)
+        check_output_location(out, "output", folder=True, overwrite=True, inputs=keep)
         if folder_is_nonempty(out) and not overwrite:
             ans = QMessageBox.question(self, "Replace folder?",
                                        f"{out} exists and is not empty.\nReplace it with this export?",
