@@ -198,10 +198,29 @@ def stop_processes(procs: Iterable, grace_s: float = CHILD_GRACE_S) -> None:
             pass
 
 
-def pool_processes(pool) -> list:
-    """The worker processes of a ``concurrent.futures.ProcessPoolExecutor`` (it has no public list)."""
-    return list((getattr(pool, "_processes", None) or {}).values())
+def stop_pool(pool, grace_s: float = CHILD_GRACE_S, timeout_s: float = 20.0) -> None:
+    """Shut a ``concurrent.futures.ProcessPoolExecutor`` down without waiting for its jobs and end
+    its workers (:func:`stop_processes`), also those its management thread starts while it winds
+    down (a loaded machine starts a spawned worker late): stop, and look again until that thread
+    has ended and no new worker appeared."""
+    import time
+
+    # shutdown() forgets both (the pool has no public list); the thread goes on adding workers to the same dict
+    workers = getattr(pool, "_processes", None) or {}
+    thread = getattr(pool, "_executor_manager_thread", None)
+    pool.shutdown(wait=False, cancel_futures=True)
+    seen: list = []
+    end = time.monotonic() + timeout_s
+    while True:
+        new = [p for p in list(workers.values()) if p not in seen]
+        stop_processes(new, grace_s=grace_s)
+        seen += new
+        if thread is not None and thread.is_alive() and time.monotonic() < end:
+            thread.join(0.2)
+            continue
+        if not [p for p in list(workers.values()) if p not in seen] or time.monotonic() >= end:
+            return
 
 
 __all__ = ["TERMINATING", "Terminated", "install", "uninstall", "terminating", "check", "deferred", "child_init",
-           "spawn_context", "stop_processes", "pool_processes"]
+           "spawn_context", "stop_processes", "stop_pool"]

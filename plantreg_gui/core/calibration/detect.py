@@ -216,7 +216,7 @@ def detect_views(session, views: list[tuple[str, str]] | set | None = None,
             else:  # cancelled, an error, a signal, or the consumer stopped: no worker may go on
                 from .. import signals
 
-                _stop_pool_workers(pool)
+                signals.stop_pool(pool, grace_s=2.0)
         ok = True
     finally:
         if cache is not None:
@@ -312,28 +312,3 @@ class DetectionCache:
             return False
         self.dirty = False
         return True
-
-
-def _stop_pool_workers(pool, timeout_s: float = 20.0) -> None:
-    """Shut ``pool`` down and end its workers, also those its management thread starts while it
-    winds down (a loaded machine starts a spawned worker late): stop, and look again until the
-    thread has ended and no new worker appeared."""
-    import time
-
-    from .. import signals
-
-    # shutdown() forgets both; the thread goes on adding workers to the same dict
-    workers = getattr(pool, "_processes", None) or {}
-    thread = getattr(pool, "_executor_manager_thread", None)
-    pool.shutdown(wait=False, cancel_futures=True)
-    seen: list = []
-    end = time.monotonic() + timeout_s
-    while True:
-        new = [p for p in list(workers.values()) if p not in seen]
-        signals.stop_processes(new, grace_s=2.0)
-        seen += new
-        if thread is not None and thread.is_alive() and time.monotonic() < end:
-            thread.join(0.2)
-            continue
-        if not [p for p in list(workers.values()) if p not in seen] or time.monotonic() >= end:
-            return

@@ -118,9 +118,7 @@ def _kill_pool() -> None:
         _state.pop("cancel", None)
     if pool is None:
         return
-    procs = signals.pool_processes(pool)
-    pool.shutdown(wait=False, cancel_futures=True)
-    signals.stop_processes(procs, grace_s=2.0)
+    signals.stop_pool(pool, grace_s=2.0)
 
 
 def warm_up() -> None:

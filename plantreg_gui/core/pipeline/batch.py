@@ -402,8 +402,7 @@ def _pool_rows(settings: BatchSettings, todo: list[Job], workers: int, attempts:
             except BaseException:
                 # a signal, an error, or the caller stopped: the workers remove their partial
                 # outputs and end, rather than the pool waiting for their jobs to finish
-                signals.stop_processes(signals.pool_processes(pool))
-                pool.shutdown(wait=False, cancel_futures=True)
+                signals.stop_pool(pool)
                 raise
             todo += queue
             if broken:
