@@ -200,13 +200,14 @@ def test_read_only_session_detects_without_cache(tmp_path, monkeypatch):
 
 def test_pool_cancel_leaves_no_worker(tmp_path):
     s = _small_session(tmp_path)
+    others = set(mp.active_children())  # e.g. a warm calibration process an earlier test started
     rep = Reporter()
     gen = detect_views(s, progress=rep, processes=True, use_cache=False)
     next(gen)
     rep.cancel.cancel()
     with pytest.raises(Cancelled):
         list(gen)
-    assert not [p for p in mp.active_children() if p.is_alive()]
+    assert not [p for p in mp.active_children() if p.is_alive() and p not in others]
 
 
 def test_unreadable_image_names_the_file(tmp_path):
