@@ -3,22 +3,24 @@ under /tmp/hp/runs via `python -m plantreg_gui` with the given source tree on PY
 classified: clean (refused: non-zero exit, one line naming the path, no traceback, inputs
 byte-unchanged, no leftovers), ok (a valid input, exit 0), MISHANDLED, VAGUE.
 
-    python tests/hostile_paths_probe.py SOURCE_TREE [NAME_FILTER ...]
+    python tests/hostile_paths_probe.py SOURCE_TREE [NAME_FILTER ...]   (HP_ROOT=/tmp/hp by default)
 
 Outputs are only ever written under /tmp/hp/runs: device outputs are private nodes made there,
 never /dev/null (an old version replaced the system's /dev/null with a file when run as root).
 """
-import json, os, shutil, subprocess, sys, hashlib, stat, tempfile
+import json, os, re, shutil, subprocess, sys, hashlib, stat, tempfile
 from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 SRC = sys.argv[1]
 only = sys.argv[2:] 
 os.environ["PYTHONPATH"] = SRC
 sys.path.insert(0, SRC)
-from test_hostile import _write_inputs, _manifest
+from test_hostile import _write_inputs, _manifest, W, H
 import numpy as np, cv2, tifffile
 
 PY = sys.executable
+#: the probe's own folder (fixtures and one fresh folder per case); HP_ROOT to run two probes at once
+ROOT = os.environ.get("HP_ROOT", "/tmp/hp")
 
 
 def _fixtures() -> None:
@@ -47,7 +49,7 @@ if not Path('/tmp/hp/fit').exists():
         ls.recordings[f'recordings/plant{s}'] = synthetic_landmarks(rig, scene, 12, 0.7, rng)
     ls.save(root / 'landmarks.json'); perturb_rig(rig, rng).save(root / 'start.json')
 """ % str(Path(__file__).resolve().parent)
-    subprocess.run([PY, "-c", code], check=True, env=dict(os.environ, PYTHONPATH=SRC))
+    subprocess.run([PY, "-c", code.replace("/tmp/hp", ROOT)], check=True, env=dict(os.environ, PYTHONPATH=SRC))
 CASES = []
 def case(expect="refuse", culprit=None):
     def deco(f):
@@ -67,8 +69,8 @@ def mkrec(root):
     rig, rec = _write_inputs(root); return rig, rec
 def mkfit(root):
     for f in ("start.json", "landmarks.json"):
-        shutil.copy(Path("/tmp/hp/fit") / f, root / f)
-    shutil.copytree("/tmp/hp/fit/recordings", root / "recordings")
+        shutil.copy(Path(ROOT, "fit") / f, root / f)
+    shutil.copytree(f"{ROOT}/fit/recordings", root / "recordings")
     return root / "start.json", root / "recordings" / "plant51"
 
 # ------------------------------------------------------------------ fit-rig outputs
@@ -329,15 +331,15 @@ def batch_out_empty_parent_file(r):
 # ------------------------------------------------------------------ calibrate / demo
 @case()
 def cal_out_loop(r):
-    s = Path("/tmp/hp/session"); shutil.copytree(s, r / "s"); os.symlink("L", r / "L")
+    s = Path(ROOT, "session"); shutil.copytree(s, r / "s"); os.symlink("L", r / "L")
     return ["calibrate", str(r / "s"), "--out", str(r / "L"), "--report", str(r / "rep.json"), "--quiet"], r / "L"
 @case()
 def cal_out_is_session_json(r):
-    s = Path("/tmp/hp/session"); shutil.copytree(s, r / "s")
+    s = Path(ROOT, "session"); shutil.copytree(s, r / "s")
     return ["calibrate", str(r / "s"), "--out", str(r / "s" / "session.json"), "--report", str(r / "rep.json"), "--quiet", "--overwrite"], "session.json"
 @case()
 def cal_out_fifo(r):
-    s = Path("/tmp/hp/session"); shutil.copytree(s, r / "s"); os.mkfifo(r / "o.json")
+    s = Path(ROOT, "session"); shutil.copytree(s, r / "s"); os.mkfifo(r / "o.json")
     return ["calibrate", str(r / "s"), "--out", str(r / "o.json"), "--report", str(r / "rep.json"), "--quiet", "--overwrite"], r / "o.json"
 @case()
 def demo_loop(r):
@@ -371,11 +373,11 @@ def own_batch_out_fifo(r):
     rig, rec = mkrec(r); os.mkfifo(r / "F"); return bat(rig, r / "F", rec), r / "F"
 @case()
 def own_cal_report_loop(r):
-    s = Path("/tmp/hp/session"); shutil.copytree(s, r / "s"); os.symlink("L.json", r / "L.json")
+    s = Path(ROOT, "session"); shutil.copytree(s, r / "s"); os.symlink("L.json", r / "L.json")
     return ["calibrate", str(r / "s"), "--out", str(r / "o.json"), "--report", str(r / "L.json"), "--quiet", "--overwrite"], r / "L.json"
 @case()
 def own_cal_report_fifo(r):
-    s = Path("/tmp/hp/session"); shutil.copytree(s, r / "s"); os.mkfifo(r / "R.json")
+    s = Path(ROOT, "session"); shutil.copytree(s, r / "s"); os.mkfifo(r / "R.json")
     return ["calibrate", str(r / "s"), "--out", str(r / "o.json"), "--report", str(r / "R.json"), "--quiet", "--overwrite"], r / "R.json"
 @case()
 def own_demo_fifo(r):
@@ -410,6 +412,431 @@ def own_image_is_socket(r):
 def own_fit_out_is_landmark_recording_image_via_dotdot(r):
     rig, rec = mkfit(r); return fit(rig, r / "landmarks.json", str(rec) + "/../plant51/depth.png", "--overwrite"), "depth.png"
 
+
+# ================================================================== round 4 (issue 22, widened)
+# New classes, generated: hostile values inside every JSON file a command reads, whole-file
+# corruptions of those files, hostile image files, hostile numbers on the command line,
+# permissions (run without root's override of permission bits), long and multi-line paths.
+def _edit(path, fn):
+    d = json.loads(Path(path).read_text()); fn(d); Path(path).write_text(json.dumps(d))
+
+def _setkey(d, keypath, value):
+    """``d`` with ``keypath`` ("cameras.1.K", "*" = delete the key) set to ``value``."""
+    parts = keypath.split(".")
+    for k in parts[:-1]:
+        d = d[int(k)] if isinstance(d, list) else d[k]
+    last = parts[-1]
+    if value is _DELETE:
+        del d[int(last) if isinstance(d, list) else last]
+    elif isinstance(d, list):
+        d[int(last)] = value
+    else:
+        d[last] = value
+_DELETE = object()
+
+def _cal(r, *extra):
+    if not (r / "s").exists():
+        shutil.copytree(f"{ROOT}/session", r / "s")
+    return ["calibrate", str(r / "s"), "--out", str(r / "o.json"), "--report", str(r / "rep.json"), "--quiet", *extra]
+
+def _intrinsics_rig(r):
+    """A one-camera rig file for calibrate --intrinsics ir=FILE (the session's ir camera, 320x240)."""
+    d = {"format": "plantreg.rig", "version": 1, "cameras": [{"name": "ir", "modality": "infrared", "width": 320,
+         "height": 240, "K": [[300, 0, 159.5], [0, 300, 119.5], [0, 0, 1]], "dist": [0, 0, 0, 0, 0]}]}
+    (r / "intr.json").write_text(json.dumps(d)); return r / "intr.json"
+
+# -- the JSON files and how a case reaches each: name -> (make(r) -> (argv, file))
+def _j_rig(r):
+    rig, rec = mkrec(r); return reg(rig, rec, r / "out"), rig
+def _j_manifest(r):
+    rig, rec = mkrec(r); return reg(rig, rec, r / "out"), rec / "recording.json"
+def _j_session(r):
+    a = _cal(r); return a, r / "s" / "session.json"
+def _j_landmarks(r):
+    rig, rec = mkfit(r); return fit(rig, r / "landmarks.json", r / "o.json"), r / "landmarks.json"
+def _j_start(r):
+    rig, rec = mkfit(r); return fit(rig, r / "landmarks.json", r / "o.json"), rig
+def _j_intrinsics(r):
+    f = _intrinsics_rig(r); return _cal(r, "--intrinsics", f"ir={f}"), f
+JSON_FILES = {"rig": _j_rig, "manifest": _j_manifest, "session": _j_session, "landmarks": _j_landmarks,
+              "startrig": _j_start, "intrinsics": _j_intrinsics}
+
+# -- whole-file corruptions: name -> (bytes from the original, expect)
+def _dup_first_key(b):
+    d = json.loads(b); k = next(iter(d)); dup = json.dumps({k: "duplicate"})[1:-1]
+    return ("{" + dup + ", " + b.decode()[1:]).encode()  # the key twice: json keeps the last silently
+FILE_CORRUPTIONS = {
+    "empty": (lambda b: b"", "refuse"),
+    "whitespace": (lambda b: b"  \n\t\n", "refuse"),
+    "text": (lambda b: b"this is not json\n", "refuse"),
+    "binary": (lambda b: bytes(range(256)) * 4, "refuse"),
+    "truncated": (lambda b: b[: len(b) // 2], "refuse"),
+    "top_list": (lambda b: b"[" + b + b"]", "refuse"),
+    "top_null": (lambda b: b"null", "refuse"),
+    "top_nan": (lambda b: b"NaN", "refuse"),
+    "deep_lists": (lambda b: b"[" * 200000 + b"]" * 200000, "refuse"),
+    "deep_objects": (lambda b: b'{"a":' * 100000 + b"1" + b"}" * 100000, "refuse"),
+    "dup_key_last_wins": (_dup_first_key, "refuse"),
+    "utf8_bom": (lambda b: b"\xef\xbb\xbf" + b, "ok"),
+    "utf16_bom": (lambda b: b.decode().encode("utf-16"), "ok"),
+    "latin1_bytes": (lambda b: b[:-1] + b', "x\xe9": 1}', "refuse"),
+    "trailing_garbage": (lambda b: b + b"\n}}garbage", "refuse"),
+}
+for fname, make in JSON_FILES.items():
+    for cname, (mut, exp) in FILE_CORRUPTIONS.items():
+        def f(r, make=make, mut=mut, exp=exp):
+            argv, file = make(r); file.write_bytes(mut(file.read_bytes()))
+            return argv, (None if exp == "ok" else file.name)
+        f.__name__ = f"json_{fname}_{cname}"; case(exp)(f)
+
+# -- hostile values at key paths: (file, keypath, value, culprit words)
+NAN, INF = float("nan"), float("inf")
+VALUES = [
+    # rig.json of register
+    *[("rig", "cameras.0.width", v, "width") for v in (NAN, INF, 1e308, -1, 0, 2.5, "32", [32], None, True)],
+    *[("rig", "cameras.1.K", v, "K") for v in ("K", [[1]], [[NAN, 0, 16], [0, 30, 12], [0, 0, 1]],
+                                                 [[1e308, 0, 16], [0, 1e308, 12], [0, 0, 1]], {"fx": 30}, None)],
+    *[("rig", "cameras.1.t", v, "t") for v in ([NAN, 0, 0], [1e308, 0, 0], [0, 0], "0,0,0", [[0], [0], [0]])],
+    *[("rig", "cameras.1.R", v, "R") for v in ([[2, 0, 0], [0, 2, 0], [0, 0, 2]], [[NAN] * 3] * 3, [1, 0, 0])],
+    *[("rig", "cameras.1.dist", v, "dist") for v in ([NAN] * 5, [1e308] * 5, [0.1] * 7, "none")],
+    *[("rig", "depth.scale", v, "scale") for v in (NAN, INF, 0, -0.001, 1e308, "0.001", None)],
+    *[("rig", "roi.min", v, "roi") for v in ([NAN, 0, 0], [0, 0], "low", [1e308, 0, 0])],
+    ("rig", "cameras", {}, "cameras"), ("rig", "cameras", [], "cameras"), ("rig", "cameras", _DELETE, "cameras"),
+    ("rig", "cameras.1", "thermal", "cameras[1]"), ("rig", "cameras.1.name", _DELETE, "name"),
+    ("rig", "cameras.1.modality", 5, "modality"), ("rig", "depth", [], "depth"), ("rig", "depth.camera", 0, "camera"),
+    ("rig", "version", NAN, "version"), ("rig", "version", 1e308, "version"), ("rig", "cameras.0.height", 1e308, "height"),
+    # recording.json of register
+    *[("manifest", "depth_scale", v, "depth_scale") for v in (NAN, INF, 0, -1, "0.001", 1e308, [0.001])],
+    ("manifest", "images", [], "images"), ("manifest", "images.thermal", 5, "thermal"),
+    ("manifest", "images.thermal", None, "thermal"), ("manifest", "images.thermal", ["thermal.tif"], "thermal"),
+    ("manifest", "depth", ["depth.png"], "depth"), ("manifest", "depth", 7, "depth"),
+    ("manifest", "images.nosuchcam", "thermal.tif", "nosuchcam"), ("manifest", "images.thermal", "/etc/passwd", "passwd"),
+    ("manifest", "images.thermal", "rgb.png", "rgb.png"), ("manifest", "depth", "ir.npy", "depth"),
+    # session.json of calibrate
+    *[("session", "board.columns", v, "columns") for v in (NAN, 0, -9, "9", 1e308, 2.5, 1)],
+    *[("session", "board.square_size", v, "square") for v in (NAN, INF, 0, -0.04, 1e308, "0.04")],
+    ("session", "board.type", "hexagon", "type"), ("session", "board", [], "board"), ("session", "board", _DELETE, "board"),
+    ("session", "cameras", [], "cameras"), ("session", "cameras", {}, "cameras"), ("session", "cameras.ir", [], "ir"),
+    ("session", "depth.scale", NAN, "scale"), ("session", "depth.scale", 1e308, "scale"), ("session", "depth.camera", "x", "camera"),
+    ("session", "review", [], "review"), ("session", "review.excluded", "pose_01:ir", "excluded"),
+    # landmarks.json of fit-rig
+    *[("landmarks", "recordings.recordings/plant51.points.0.depth_uv", v, "depth_uv")
+      for v in ([NAN, 1], [INF, 1], [1e308, 1], [-5, -5], "339,377", [1], None, [1, 2, 3])],
+    *[("landmarks", "recordings.recordings/plant51.points.0.cameras.rgb", v, "rgb") for v in ([NAN, 1], [1e308, 1e308], {"u": 1})],
+    ("landmarks", "recordings", [], "recordings"), ("landmarks", "recordings", _DELETE, "recordings"),
+    ("landmarks", "recordings.recordings/plant51.points", {}, "points"), ("landmarks", "version", NAN, "version"),
+    ("landmarks", "version", 1e308, "version"), ("landmarks", "format", 5, "format"),
+    ("landmarks", "recordings.recordings/plant51.points.0.cameras", [], "cameras"),
+    ("landmarks", "recordings.recordings/plant51.points.0.cameras.nosuchcam", [5, 5], "nosuchcam"),
+    # start rig of fit-rig and the --intrinsics rig of calibrate
+    ("startrig", "cameras.0.K", [[NAN, 0, 1], [0, 1, 1], [0, 0, 1]], "K"), ("startrig", "cameras.0.width", 1e308, "width"),
+    ("startrig", "depth", _DELETE, "depth"), ("startrig", "cameras.1.t", [INF, 0, 0], "t"),
+    ("intrinsics", "cameras.0.K", [[NAN, 0, 1], [0, 1, 1], [0, 0, 1]], "K"), ("intrinsics", "cameras.0.width", 640, "640"),
+    ("intrinsics", "cameras.0.name", "rgb", "intr.json"), ("intrinsics", "cameras.0.dist", [1e308] * 5, "dist"),
+    ("intrinsics", "cameras", [], "cameras"),
+]
+for i, (fname, keypath, value, word) in enumerate(VALUES):
+    def f(r, fname=fname, keypath=keypath, value=value, word=word):
+        argv, file = JSON_FILES[fname](r); _edit(file, lambda d: _setkey(d, keypath, value))
+        return argv, (file.name, word)
+    tag = re.sub(r"[^A-Za-z0-9]+", "_", f"{keypath}_{'del' if value is _DELETE else json.dumps(value)[:12]}")
+    f.__name__ = f"val_{fname}_{tag}_{i}"; case()(f)
+# a rig file list of a million numbers where a few are expected (parsed, then refused by key)
+@case()
+def val_rig_huge_dist(r):
+    argv, file = _j_rig(r); _edit(file, lambda d: _setkey(d, "cameras.1.dist", [0.0] * 1_000_000)); return argv, ("rig.json", "dist")
+@case("ok")
+def val_rig_huge_unused_array(r):
+    argv, file = _j_rig(r); _edit(file, lambda d: _setkey(d, "notes", list(range(500_000)))); return argv, None
+@case()
+def val_manifest_many_cameras(r):
+    argv, file = _j_manifest(r); _edit(file, lambda d: d["images"].update({f"c{i}": "thermal.tif" for i in range(5000)}))
+    return argv, ("recording.json", "c0")
+@case()
+def json_rig_oversize(r):
+    argv, file = _j_rig(r); file.write_bytes(b'{"cameras": [' + b"0," * (33 << 20) + b'0]}'); return argv, "rig.json"
+
+# -- hostile image files in a recording (register) and a calibration session (calibrate)
+def _png_forged_size(path, w, h, bitdepth=8, ctype=0, plte=False):
+    import struct, zlib
+    def chunk(k, d): return struct.pack(">I", len(d)) + k + d + struct.pack(">I", zlib.crc32(k + d) & 0xFFFFFFFF)
+    body = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, bitdepth, ctype, 0, 0, 0))
+    if plte: body += chunk(b"PLTE", bytes(range(48)))
+    body += chunk(b"IDAT", zlib.compress(b"\x00" * 64)) + chunk(b"IEND", b"")
+    Path(path).write_bytes(body)
+def _tiff_forged_size(path, w, h):
+    tifffile.imwrite(path, np.zeros((4, 4), np.uint16))
+    b = bytearray(Path(path).read_bytes())
+    with tifffile.TiffFile(path) as t:
+        tags = t.pages[0].tags
+        for name, val in (("ImageWidth", w), ("ImageLength", h)):
+            tg = tags[name]; off = tg.valueoffset; size = 2 if tg.dtype == 3 else 4
+            b[off:off + size] = val.to_bytes(size, "little")
+    Path(path).write_bytes(bytes(b))
+IMAGE_CASES = {
+    # name: (camera file, writer(path), expect, culprit word)
+    "depth_zero_bytes": ("depth.png", lambda p: p.write_bytes(b""), "refuse", "empty"),
+    "depth_truncated": ("depth.png", lambda p: p.write_bytes(p.read_bytes()[:60]), "refuse", "truncated"),
+    "depth_forged_100000": ("depth.png", lambda p: _png_forged_size(p, 100000, 100000, 16), "refuse", "depth.png"),
+    "depth_one_pixel": ("depth.png", lambda p: cv2.imwrite(str(p), np.full((1, 1), 1000, np.uint16)), "refuse", "1x1"),
+    "depth_all_zero": ("depth.png", lambda p: cv2.imwrite(str(p), np.zeros((H, W), np.uint16)), "refuse", "depth"),
+    "depth_rgb": ("depth.png", lambda p: cv2.imwrite(str(p), np.full((H, W, 3), 100, np.uint8)), "refuse", "channel"),
+    "depth_rgba": ("depth.png", lambda p: cv2.imwrite(str(p), np.full((H, W, 4), 100, np.uint8)), "refuse", "channel"),
+    "depth_is_tiff_named_png": ("depth.png", lambda p: tifffile.imwrite(p, np.full((H, W), 1000, np.uint16)), "refuse", "PNG"),
+    "depth_palette_png": ("depth.png", lambda p: _png_forged_size(p, W, H, 8, 3, plte=True), "refuse", "depth.png"),
+    "thermal_zero_bytes": ("thermal.tif", lambda p: p.write_bytes(b""), "refuse", "empty"),
+    "thermal_truncated": ("thermal.tif", lambda p: p.write_bytes(p.read_bytes()[:-200]), "refuse", "thermal.tif"),
+    "thermal_forged_100000": ("thermal.tif", lambda p: _tiff_forged_size(p, 100000, 100000), "refuse", "thermal.tif"),
+    "thermal_png_named_tif": ("thermal.tif", lambda p: p.write_bytes(cv2.imencode(".png", np.zeros((24, 32), np.uint8))[1].tobytes()), "refuse", "thermal.tif"),
+    "thermal_one_pixel": ("thermal.tif", lambda p: tifffile.imwrite(p, np.ones((1, 1), np.float32)), "refuse", "1x1"),
+    "thermal_stack_pages": ("thermal.tif", lambda p: tifffile.imwrite(p, np.ones((5, 24, 32), np.float32)), "refuse", "thermal.tif"),
+    "thermal_complex": ("thermal.tif", lambda p: tifffile.imwrite(p, np.ones((24, 32), np.complex64)), "refuse", "complex"),
+    "thermal_text": ("thermal.tif", lambda p: p.write_text("II*\x00 not really"), "refuse", "thermal.tif"),
+    "thermal_all_nan": ("thermal.tif", lambda p: tifffile.imwrite(p, np.full((24, 32), np.nan, np.float32)), "ok", None),
+    "thermal_inf": ("thermal.tif", lambda p: tifffile.imwrite(p, np.full((24, 32), np.inf, np.float32)), "ok", None),
+    "thermal_float64": ("thermal.tif", lambda p: tifffile.imwrite(p, np.full((24, 32), 20.5, np.float64)), "ok", None),
+    "thermal_rgba": ("thermal.tif", lambda p: tifffile.imwrite(p, np.full((24, 32, 4), 7, np.uint8)), "ok", None),
+    "rgb_forged_100000": ("rgb.png", lambda p: _png_forged_size(p, 100000, 100000, 8, 2), "refuse", "rgb.png"),
+    "rgb_jpeg_named_png": ("rgb.png", lambda p: p.write_bytes(cv2.imencode(".jpg", np.zeros((60, 80, 3), np.uint8))[1].tobytes()), "refuse", "rgb.png"),
+    "rgb_16bit": ("rgb.png", lambda p: cv2.imwrite(str(p), np.full((60, 80, 3), 4000, np.uint16)), "ok", None),
+    "rgb_gray": ("rgb.png", lambda p: cv2.imwrite(str(p), np.full((60, 80), 7, np.uint8)), "ok", None),
+    "rgb_crc_broken": ("rgb.png", lambda p: p.write_bytes(p.read_bytes()[:40] + b"\x00" + p.read_bytes()[41:]), "refuse", "rgb.png"),
+    "ir_npy_object": ("ir.npy", lambda p: np.save(p, np.array([[object()]]), allow_pickle=True), "refuse", "ir.npy"),
+    "ir_npy_0d": ("ir.npy", lambda p: np.save(p, np.float32(3)), "refuse", "ir.npy"),
+    "ir_npy_4d": ("ir.npy", lambda p: np.save(p, np.ones((H, W, 2, 2), np.uint16)), "refuse", "ir.npy"),
+    "ir_npy_bool": ("ir.npy", lambda p: np.save(p, np.ones((H, W), bool)), "ok", None),
+}
+for nm, (fn, writer, exp, word) in IMAGE_CASES.items():
+    def f(r, fn=fn, writer=writer, exp=exp, word=word):
+        rig, rec = mkrec(r); writer(rec / fn); return reg(rig, rec, r / "out"), (None if exp == "ok" else (fn, word))
+    f.__name__ = f"img_{nm}"; case(exp)(f)
+# float depth maps: NaN/inf where nothing was measured is how float depth is written; all-NaN is empty
+for nm, arr, exp in (("depth_float_nan_holes", "holes", "ok"), ("depth_float_all_nan", "nan", "refuse"),
+                     ("depth_float_all_inf", "inf", "refuse"), ("depth_float_negative", "neg", "refuse"),
+                     ("depth_float_huge", "huge", "refuse")):
+    def f(r, arr=arr, exp=exp):
+        rig, rec = mkrec(r)
+        d = np.full((H, W), 1.0, np.float32)
+        if arr == "holes": d[::3] = np.nan; d[1::7] = np.inf
+        elif arr == "nan": d[:] = np.nan
+        elif arr == "inf": d[:] = np.inf
+        elif arr == "neg": d[:] = -1.0
+        elif arr == "huge": d[:] = 3e38
+        tifffile.imwrite(rec / "depth.tif", d); _manifest(rec, depth="depth.tif")
+        _edit(rec / "recording.json", lambda m: m.update(depth_scale=1.0))
+        return reg(rig, rec, r / "out"), (None if exp == "ok" else ("depth.tif", "depth"))
+    f.__name__ = f"img_{nm}"; case(exp)(f)
+for nm, writer in (("zero_bytes", lambda p: p.write_bytes(b"")), ("truncated", lambda p: p.write_bytes(p.read_bytes()[:100])),
+                   ("forged_size", lambda p: _png_forged_size(p, 100000, 100000)), ("text", lambda p: p.write_text("hello"))):
+    def f(r, writer=writer):
+        a = _cal(r); img = sorted((r / "s" / "pose_01").glob("ir.*"))[0]; writer(img); return a, img.name
+    f.__name__ = f"img_session_{nm}"; case()(f)
+
+# -- hostile numbers on the command line
+def _rig_create(r, *cams, extra=()):
+    return ["rig", "create", str(r / "new.json"), "--depth-camera", "ir",
+            *[x for c in (cams or ("ir=infrared,640x576,f=504,rot=0",)) for x in ("--camera", c)], *extra]
+RC_OK = "rgb=rgb,1280x720,hfov=90,rot=0,at=0.03,0,0"
+for nm, spec, word in (("size_zero", "rgb=rgb,0x0,hfov=90,rot=0", "0x0"), ("size_negative", "rgb=rgb,-5x10,hfov=90,rot=0", "-5x10"),
+                       ("size_huge", "rgb=rgb,100000x100000,hfov=90,rot=0", "100000"), ("size_words", "rgb=rgb,axb,hfov=90,rot=0", "axb"),
+                       ("hfov_zero", "rgb=rgb,1280x720,hfov=0,rot=0", "hfov"), ("hfov_180", "rgb=rgb,1280x720,hfov=180,rot=0", "hfov"),
+                       ("hfov_nan", "rgb=rgb,1280x720,hfov=nan,rot=0", "hfov"), ("hfov_neg", "rgb=rgb,1280x720,hfov=-10,rot=0", "hfov"),
+                       ("hfov_inf", "rgb=rgb,1280x720,hfov=inf,rot=0", "hfov"), ("hfov_1e308", "rgb=rgb,1280x720,hfov=1e308,rot=0", "hfov"),
+                       ("vfov_nan", "rgb=rgb,1280x720,hfov=90,vfov=nan,rot=0", "vfov"), ("f_neg", "rgb=rgb,1280x720,f=-5,rot=0", "f"),
+                       ("f_zero", "rgb=rgb,1280x720,f=0,rot=0", "f"), ("f_nan", "rgb=rgb,1280x720,f=nan,rot=0", "f"),
+                       ("f_1e308", "rgb=rgb,1280x720,f=1e308,rot=0", "f"), ("fy_neg", "rgb=rgb,1280x720,f=500,fy=-1,rot=0", "fy"),
+                       ("rot_45", "rgb=rgb,1280x720,hfov=90,rot=45", "rot"), ("rot_nan", "rgb=rgb,1280x720,hfov=90,rot=nan", "rot"),
+                       ("at_nan", "rgb=rgb,1280x720,hfov=90,rot=0,at=nan,0,0", "at"), ("at_1e308", "rgb=rgb,1280x720,hfov=90,rot=0,at=1e308,0,0", "at"),
+                       ("at_two", "rgb=rgb,1280x720,hfov=90,rot=0,at=1,2", "at"), ("no_lens", "rgb=rgb,1280x720,rot=0", "rgb"),
+                       ("bad_modality", "rgb=sonar,1280x720,hfov=90,rot=0", "sonar"), ("name_slash", "a/b=rgb,1280x720,hfov=90,rot=0", "a/b"),
+                       ("name_newline", "a\nb=rgb,1280x720,hfov=90,rot=0", "U+000A"), ("kinect_devzero", "rgb=rgb,640x576,kinect=/dev/zero,rot=0", "/dev/zero"),
+                       ("kinect_missing", "rgb=rgb,640x576,kinect=/nonexistent/cal.json,rot=0", "cal.json")):
+    def f(r, spec=spec, word=word):
+        return _rig_create(r, "ir=infrared,640x576,f=504,rot=0", spec), word
+    f.__name__ = f"num_rigcreate_{nm}"; case()(f)
+@case()
+def num_rigcreate_kinect_notjson(r):
+    (r / "k.json").write_text("garbage"); return _rig_create(r, "ir=infrared,640x576,f=504,rot=0", f"rgb=rgb,640x576,kinect={r / 'k.json'},rot=0"), "k.json"
+@case()
+def num_rigcreate_kinect_nan(r):
+    (r / "k.json").write_text('{"CalibrationInformation": {"Cameras": [{"Intrinsics": {"ModelParameters": [NaN, NaN]}}]}}')
+    return _rig_create(r, "ir=infrared,640x576,f=504,rot=0", f"rgb=rgb,640x576,kinect={r / 'k.json'},rot=0"), "k.json"
+@case()
+def num_rigcreate_dup_names(r):
+    return _rig_create(r, "ir=infrared,640x576,f=504,rot=0", RC_OK, RC_OK), "rgb"
+@case()
+def num_rigcreate_depth_cam_missing(r):
+    return ["rig", "create", str(r / "new.json"), "--depth-camera", "nosuch", "--camera", RC_OK], "nosuch"
+for nm, extra, word in (("scale_nan", ("--depth-scale", "nan"), "scale"), ("scale_zero", ("--depth-scale", "0"), "scale"),
+                        ("scale_neg", ("--depth-scale", "-1"), "scale"), ("scale_inf", ("--depth-scale", "inf"), "scale"),
+                        ("roi_nan", ("--roi", "nan,0,0,1,1,1"), "roi"), ("roi_inf", ("--roi", "0,0,0,inf,1,1"), "roi"),
+                        ("roi_min_gt_max", ("--roi", "1,1,1,0,0,0"), "roi"), ("roi_five", ("--roi", "0,0,0,1,1"), "roi"),
+                        ("roi_1e308", ("--roi", "-1e308,0,0,1e308,1,1"), "roi")):
+    def f(r, extra=extra, word=word):
+        return _rig_create(r, "ir=infrared,640x576,f=504,rot=0", RC_OK, extra=extra), word
+    f.__name__ = f"num_rigcreate_{nm}"; case()(f)
+@case("ok")
+def num_rigcreate_valid(r):
+    return _rig_create(r, "ir=infrared,640x576,f=504,rot=0", RC_OK, extra=("--roi", "-0.5,-0.5,0.2,0.5,0.5,1.2")), None
+for nm, extra, word in (("max_rms_neg", ("--max-rms", "-1"), "--max-rms"), ("max_rms_zero", ("--max-rms", "0"), "--max-rms"),
+                        ("max_rms_nan", ("--max-rms", "nan"), "--max-rms"), ("max_rms_inf", ("--max-rms", "inf"), "--max-rms"),
+                        ("roi_nan", ("--roi", "nan", "0", "0", "1", "1", "1"), "--roi"), ("roi_min_gt_max", ("--roi", "1", "1", "1", "0", "0", "0"), "--roi"),
+                        ("roi_1e308", ("--roi", "-1e308", "-1", "0", "1e308", "1", "1"), "--roi"),
+                        ("exclude_garbage", ("--exclude", "nocolon"), "nocolon"), ("exclude_unknown", ("--exclude", "pose_99:ir"), "pose_99"),
+                        ("intrinsics_nosep", ("--intrinsics", "ir"), "--intrinsics"), ("intrinsics_unknown_cam", ("--intrinsics", "zz=x.json"), "zz"),
+                        ("intrinsics_missing_file", ("--intrinsics", "ir=/nonexistent.json"), "nonexistent.json"),
+                        ("intrinsics_devzero", ("--intrinsics", "ir=/dev/zero"), "/dev/zero")):
+    def f(r, extra=extra, word=word):
+        return _cal(r, *extra), word
+    f.__name__ = f"num_cal_{nm}"; case()(f)
+for nm, extra, word in (("max_median_nan", ("--max-median", "nan"), "--max-median"), ("max_median_neg", ("--max-median", "-1"), "--max-median"),
+                        ("max_median_zero", ("--max-median", "0"), "--max-median"), ("max_median_inf", ("--max-median", "inf"), "--max-median"),
+                        ("worst_neg", ("--worst", "-1"), "--worst"), ("worst_huge", ("--worst", "99999999999999999999999"), "--worst"),
+                        ("prior_nan", ("--prior", "rotation=nan"), "rotation"), ("prior_neg", ("--prior", "focal=-1"), "focal"),
+                        ("prior_zero", ("--prior", "position=0"), "position"), ("prior_inf", ("--prior", "click=inf"), "click"),
+                        ("prior_1e308", ("--prior", "robust=1e308"), "robust"), ("prior_unknown", ("--prior", "colour=1"), "colour"),
+                        ("prior_novalue", ("--prior", "rotation"), "rotation"), ("prior_twoeq", ("--prior", "rotation=5=6"), "rotation"),
+                        ("free_unknown", ("--free", "zoom"), "zoom"), ("free_unknown_cam", ("--free", "nosuch:focal"), "nosuch"),
+                        ("fit_unknown_cam", ("--fit", "nosuch"), "nosuch"), ("fit_empty", ("--fit", ","), "--fit")):
+    def f(r, extra=extra, word=word):
+        rig, rec = mkfit(r); return fit(rig, r / "landmarks.json", r / "o.json", *extra), word
+    f.__name__ = f"num_fit_{nm}"; case()(f)
+for nm, extra, word in (("edge_nan", ("--edge-angle", "nan"), "--edge-angle"), ("edge_neg", ("--edge-angle", "-5"), "edge"),
+                        ("edge_1e308", ("--edge-angle", "1e308"), "edge"), ("edge_zero", ("--edge-angle", "0"), "edge"),
+                        ("edge_90", ("--edge-angle", "90"), "edge"), ("jump_neg", ("--flying-jump", "-1"), "flying"),
+                        ("jump_zero", ("--flying-jump", "0"), "flying"), ("jump_inf", ("--flying-jump", "inf"), "--flying-jump"),
+                        ("denoise_neg", ("--denoise-size", "-1"), "denoise"), ("denoise_even", ("--denoise-size", "4"), "denoise"),
+                        ("denoise_huge", ("--denoise-size", "1000000001"), "denoise"), ("mixed_neg", ("--mixed-radius", "-1"), "mixed"),
+                        ("mixed_1e308", ("--mixed-radius", "1e308"), "mixed"), ("outputs_bogus", ("--outputs", "bogus"), "bogus"),
+                        ("outputs_empty", ("--outputs", ""), "--outputs"), ("outputs_commas", ("--outputs", ",,"), "--outputs")):
+    def f(r, extra=extra, word=word):
+        rig, rec = mkrec(r); return reg(rig, rec, r / "out", *extra), word
+    f.__name__ = f"num_reg_{nm}"; case()(f)
+@case()
+def num_reg_target_empty(r):
+    rig, rec = mkrec(r); a = reg(rig, rec, r / "out"); a[a.index("--target") + 1] = ""; return a, "target"
+@case()
+def num_reg_target_unknown(r):
+    rig, rec = mkrec(r); a = reg(rig, rec, r / "out"); a[a.index("--target") + 1] = "nosuch"; return a, "nosuch"
+for nm, extra, word in (("workers_zero", ("--workers", "0"), "--workers"), ("workers_neg", ("--workers", "-3"), "--workers"),
+                        ("workers_huge", ("--workers", "100000000000000000000"), "--workers"), ("workers_nan", ("--workers", "nan"), "--workers"),
+                        ("edge_nan", ("--edge-angle", "nan"), "--edge-angle"), ("scheduler_garbage", ("--scheduler", "not an address"), "--scheduler")):
+    def f(r, extra=extra, word=word):
+        rig, rec = mkrec(r); return bat(rig, r / "out", rec, *extra), word
+    f.__name__ = f"num_batch_{nm}"; case()(f)
+for nm, extra, word in (("seed_neg", ("--seed", "-1"), "--seed"), ("seed_huge", ("--seed", str(2 ** 64)), "--seed"),
+                        ("seed_nan", ("--seed", "nan"), "--seed"), ("size_bogus", ("--size", "huge"), "--size")):
+    def f(r, extra=extra, word=word):
+        return ["demo", str(r / "d"), "--quiet", *extra], word
+    f.__name__ = f"num_demo_{nm}"; case()(f)
+for nm, extra, word in (("depth_scale_nan", ("--depth-scale", "nan"), "--depth-scale"), ("depth_scale_neg", ("--depth-scale", "-1"), "--depth-scale"),
+                        ("depth_scale_inf", ("--depth-scale", "inf"), "--depth-scale"), ("depth_scale_1e308", ("--depth-scale", "1e308"), "--depth-scale")):
+    def f(r, extra=extra, word=word):
+        _imgs(r); return rc(r / "rec", "--depth", str(r / "depth.png"), *extra), word
+    f.__name__ = f"num_rc_{nm}"; case()(f)
+
+# -- permissions: run without root's override of permission bits (setpriv drops CAP_DAC_*)
+NOCAP = "__NOCAP__"
+for nm, target in (("rig", "rig"), ("manifest", "manifest"), ("image", "thermal"), ("depth", "depth"), ("rec_folder", "recfolder")):
+    def f(r, target=target):
+        rig, rec = mkrec(r)
+        p = {"rig": rig, "manifest": rec / "recording.json", "thermal": rec / "thermal.tif", "depth": rec / "depth.png",
+             "recfolder": rec}[target]
+        os.chmod(p, 0o000)
+        return reg(rig, rec, r / "out") + [NOCAP], p.name
+    f.__name__ = f"perm_reg_unreadable_{nm}"; case()(f)
+@case()
+def perm_reg_out_parent_readonly(r):
+    rig, rec = mkrec(r); (r / "ro").mkdir(); os.chmod(r / "ro", 0o555); return reg(rig, rec, r / "ro" / "o") + [NOCAP], "ro"
+@case()
+def perm_reg_overwrite_readonly_out(r):
+    rig, rec = mkrec(r); (r / "out").mkdir(); (r / "out" / "old.txt").write_text("x"); os.chmod(r / "out", 0o555)
+    return reg(rig, rec, r / "out", "--overwrite") + [NOCAP], "out"
+@case()
+def perm_fit_unreadable_landmarks(r):
+    rig, rec = mkfit(r); os.chmod(r / "landmarks.json", 0); return fit(rig, r / "landmarks.json", r / "o.json") + [NOCAP], "landmarks.json"
+@case()
+def perm_fit_unreadable_depth(r):
+    rig, rec = mkfit(r); d = next(rec.glob("depth.*")); os.chmod(d, 0)
+    return fit(rig, r / "landmarks.json", r / "o.json") + [NOCAP], d.name
+@case()
+def perm_fit_out_readonly(r):
+    rig, rec = mkfit(r); (r / "ro").mkdir(); os.chmod(r / "ro", 0o555); return fit(rig, r / "landmarks.json", r / "ro" / "o.json") + [NOCAP], "ro"
+@case()
+def perm_cal_unreadable_image(r):
+    a = _cal(r); img = sorted((r / "s" / "pose_02").glob("rgb.*"))[0]; os.chmod(img, 0); return a + [NOCAP], img.name
+@case()
+def perm_cal_unreadable_session(r):
+    a = _cal(r); os.chmod(r / "s" / "session.json", 0); return a + [NOCAP], "session.json"
+@case()
+def perm_cal_out_readonly(r):
+    a = _cal(r); (r / "ro").mkdir(); os.chmod(r / "ro", 0o555); a[a.index("--out") + 1] = str(r / "ro" / "o.json"); return a + [NOCAP], "ro"
+@case()
+def perm_rc_unreadable_image(r):
+    _imgs(r); os.chmod(r / "ir.png", 0); return rc(r / "rec", "--image", f"ir={r / 'ir.png'}") + [NOCAP], "ir.png"
+@case()
+def perm_rc_dir_readonly(r):
+    _imgs(r); (r / "ro").mkdir(); os.chmod(r / "ro", 0o555); return rc(r / "ro", "--depth", str(r / "depth.png")) + [NOCAP], "ro"
+@case()
+def perm_batch_out_readonly(r):
+    rig, rec = mkrec(r); (r / "ro").mkdir(); os.chmod(r / "ro", 0o555); return bat(rig, r / "ro", rec) + [NOCAP], "ro"
+@case()
+def perm_batch_unreadable_recording(r):
+    rig, rec = mkrec(r); os.chmod(rec / "recording.json", 0); return bat(rig, r / "out", rec) + [NOCAP], "recording.json"
+@case()
+def perm_demo_readonly(r):
+    (r / "ro").mkdir(); os.chmod(r / "ro", 0o555); return ["demo", str(r / "ro" / "d"), "--quiet"] + [NOCAP], "ro"
+@case()
+def perm_rigcreate_readonly(r):
+    (r / "ro").mkdir(); os.chmod(r / "ro", 0o555)
+    return ["rig", "create", str(r / "ro" / "n.json"), "--depth-camera", "ir", "--camera", "ir=infrared,640x576,f=504,rot=0"] + [NOCAP], "ro"
+
+# -- long paths and names with newlines
+@case()
+def long_input_rig_component(r):
+    rig, rec = mkrec(r); return reg(r / ("r" * 300 + ".json"), rec, r / "out"), "r" * 30
+@case()
+def long_input_total_path(r):
+    rig, rec = mkrec(r); deep = r / "/".join(["d" * 200] * 25) / "rig.json"; return reg(deep, rec, r / "out"), "d" * 30
+@case()
+def long_out_total_path(r):
+    rig, rec = mkrec(r); deep = r / "/".join(["d" * 200] * 25); return reg(rig, rec, deep), "d" * 30
+@case()
+def long_manifest_image_name(r):
+    rig, rec = mkrec(r); _manifest(rec, thermal="t" * 300 + ".tif"); return reg(rig, rec, r / "out"), "t" * 30
+@case()
+def long_rc_image_component(r):
+    _imgs(r); return rc(r / "rec", "--image", f"ir={r / ('i' * 300 + '.png')}"), "i" * 30
+@case()
+def long_fit_out_total(r):
+    rig, rec = mkfit(r); return fit(rig, r / "landmarks.json", r / "/".join(["d" * 200] * 25) / "o.json"), "d" * 30
+@case("ok")
+def newline_out_folder(r):
+    rig, rec = mkrec(r); return reg(rig, rec, r / "out\nx"), None
+@case("ok")
+def newline_recording_folder(r):
+    rig, rec = mkrec(r); shutil.move(rec, r / "re\nc"); return reg(rig, r / "re\nc", r / "out"), None
+@case()
+def newline_missing_recording(r):
+    rig, rec = mkrec(r); return reg(rig, r / "no\nsuch", r / "out"), "such"
+@case()
+def newline_missing_image(r):
+    rig, rec = mkrec(r); _manifest(rec, thermal="ther\nmal.tif"); return reg(rig, rec, r / "out"), "mal.tif"
+@case("ok")
+def newline_batch_recording(r):
+    rig, rec = mkrec(r); shutil.move(rec, r / "re\nc"); return bat(rig, r / "out", r / "re\nc"), None
+@case()
+def newline_batch_failing_recording(r):
+    rig, rec = mkrec(r); shutil.move(rec, r / "re\nc"); (r / "re\nc" / "thermal.tif").write_bytes(b"")
+    return bat(rig, r / "out", r / "re\nc"), "thermal.tif"
+@case()
+def newline_cal_out(r):
+    a = _cal(r, "--max-rms", "0.0000001"); a[a.index("--out") + 1] = str(r / "o\n.json"); return a, "max-rms"
+@case()
+def newline_rc_missing_depth(r):
+    _imgs(r); return rc(r / "rec", "--depth", str(r / "de\npth.png")), "pth.png"
+
+
 def snapshot(root):
     out = {}
     for dp, dn, fn in os.walk(root):
@@ -426,7 +853,7 @@ def snapshot(root):
     return out
 
 def run_case(name, f, expect):
-    r = Path(tempfile.mkdtemp(prefix="hp_", dir="/tmp/hp/runs"))
+    r = Path(tempfile.mkdtemp(prefix="hp_", dir=f"{ROOT}/runs"))
     argv, culprit = f(r)
     cwd = r / "cwd" if (r / "cwd").is_dir() else r
     before = snapshot(r)
@@ -435,11 +862,16 @@ def run_case(name, f, expect):
         argv.remove("__CLOSE_STDOUT__"); stdout = "close"
     if "__DEVFULL__" in argv:
         argv.remove("__DEVFULL__"); stdout = open("/dev/full", "w")
+    nocap = NOCAP in argv
+    if nocap:  # as root without CAP_DAC_OVERRIDE/READ_SEARCH: permission bits apply, as for any user
+        argv.remove(NOCAP)
     if "__ULIMIT__" in argv:
         argv.remove("__ULIMIT__")
         import resource
         pre = lambda: resource.setrlimit(resource.RLIMIT_AS, (900000 * 1024, 900000 * 1024))
     cmd = [PY, "-m", "plantreg_gui", *argv]
+    if nocap:
+        cmd = ["setpriv", "--bounding-set=-dac_override,-dac_read_search", *cmd]
     if stdout == "close":
         import shlex
         p = subprocess.run(["bash", "-c", " ".join(map(shlex.quote, cmd)) + " >&-"], stderr=subprocess.PIPE, text=True, cwd=cwd, timeout=300)
@@ -474,6 +906,12 @@ def run_case(name, f, expect):
             miss = [w for w in need if w not in err and Path(w).name not in err]
             if p.returncode == 2 and "must not be empty" in err:
                 lines, miss = lines[-1:], []  # argparse's usage + one error line, exit 2 (the convention)
+            elif p.returncode == 2 and len(lines) >= 2 and lines[0].startswith("usage:") and ": error: " in lines[-1]:
+                lines = lines[-1:]  # argparse's usage + one error line naming the option, exit 2
+            if argv[0] == "batch":  # a summary line, then one "failed RECORDING: why" line per recording
+                lines = [l for l in lines if l.lstrip().startswith(("failed", "plantreg:"))]
+                if any(len(str(w)) > 8 and l.count(str(w)) > 1 for w in need for l in lines):
+                    lines = lines * 2  # the recording named twice ("failed X: X: ..."): vague
             if len(lines) != 1 or miss or ".part" in err or "XXXX" in err:
                 verdict = "VAGUE"
     shutil.rmtree(r, ignore_errors=True)
@@ -482,7 +920,7 @@ def run_case(name, f, expect):
     return verdict, p.returncode, (problems, err.strip()[-300:])
 
 if __name__ == "__main__":
-    Path("/tmp/hp/runs").mkdir(parents=True, exist_ok=True)
+    Path(ROOT, "runs").mkdir(parents=True, exist_ok=True)
     _fixtures()
     counts = {}
     for name, f, expect in CASES:

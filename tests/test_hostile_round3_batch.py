@@ -39,10 +39,12 @@ def _rows(out: Path) -> dict[str, dict[str, str]]:
 def _leftovers(folder: Path) -> list[str]:
     """Temporary outputs and lock files anywhere under ``folder``."""
     return sorted(str(p.relative_to(folder)) for p in folder.rglob("*")
-                  if ".part" in p.name or ".old" in p.name or p.name.endswith(".lock"))
+                  if ".part" in p.name or ".old" in p.name or p.name.endswith("lock"))
 
 
-LOCK_NAME = ".plantreg-batch.lock"  # docs/errors.md names it
+def _lock_of(out: Path) -> Path:
+    """The lock file of output OUT: ``.OUT.plantreg-lock`` beside it (docs/errors.md names it)."""
+    return out.parent / f".{out.name}.plantreg-lock"
 
 
 def _free_port() -> int:
@@ -183,29 +185,29 @@ time.sleep(600)
 
 
 def test_a_concurrent_batch_into_the_same_out_is_refused_and_a_stale_lock_is_taken_over(tmp_path, capsys):
-    """Another batch holds OUT's lock: this one is refused with one line naming OUT and the holder,
+    """Another run holds OUT's lock: this one is refused with one line naming OUT and the holder,
     and writes nothing (it used to run, the last writer's batch.csv winning). Once the holder is
     killed (SIGKILL: no clean-up, its lock file stays), the lock is free -- known by the kernel's
     lock, not by the file's age -- and the next batch runs and removes the lock file."""
     rig, rec = _write_inputs(tmp_path)
     out = tmp_path / "out"
     out.mkdir()
-    holder = subprocess.Popen([sys.executable, "-c", _HOLDER, str(out / LOCK_NAME)], stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen([sys.executable, "-c", _HOLDER, str(_lock_of(out))], stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout.readline().strip() == "held"
         base = ["batch", "--rig", str(rig), "--target", "ir", "--out", str(out), "--workers", "1", "--quiet"]
         code = cli.main([*base, str(rec)])
         err = capsys.readouterr().err
-        assert code == 1 and str(out) in err and "another plantreg batch" in err and str(holder.pid) in err, err
+        assert code == 1 and str(out) in err and "another plantreg run" in err and str(holder.pid) in err, err
         assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
-        assert sorted(p.name for p in out.iterdir()) == [LOCK_NAME]  # nothing written, the holder's lock kept
+        assert list(out.iterdir()) == [] and _lock_of(out).is_file()  # nothing written, the holder's lock kept
     finally:
         holder.kill()
         holder.wait(10)
-    assert (out / LOCK_NAME).is_file()  # stale: its process is gone
+    assert _lock_of(out).is_file()  # stale: its process is gone
     assert cli.main([*base, str(rec)]) == 0
     assert _rows(out)["rec"]["status"] == "done"
-    assert sorted(p.name for p in out.iterdir()) == ["batch.csv", "rec"]
+    assert sorted(p.name for p in out.iterdir()) == ["batch.csv", "rec"] and not _lock_of(out).exists()
 
 
 # ---------------------------------------------------------------------- signals
@@ -247,11 +249,11 @@ def test_a_second_batch_while_the_first_writes_is_refused(two_recordings, tmp_pa
     finally:
         if a.poll() is None:
             a.kill()
-    assert b.returncode == 1 and "another plantreg batch" in b.stderr and f"process {a.pid}" in b.stderr, b.stderr
+    assert b.returncode == 1 and "another plantreg run" in b.stderr and f"process {a.pid}" in b.stderr, b.stderr
     assert str(out) in b.stderr and len(b.stderr.strip().splitlines()) == 1
     assert a.returncode == 0, err_a
     assert list(_rows(out)) == ["rec01", "rec02"] and {r["status"] for r in _rows(out).values()} == {"done"}
-    assert _leftovers(out) == []
+    assert _leftovers(tmp_path) == []
 
 
 def test_sigterm_to_the_batch_process_group_leaves_no_part(two_recordings, tmp_path):
@@ -279,7 +281,7 @@ def test_sigterm_to_the_batch_process_group_leaves_no_part(two_recordings, tmp_p
     time.sleep(0.5)  # a worker that outlived its parent would still be writing now
     assert p.returncode == 128 + signal.SIGTERM, (p.returncode, err)
     assert "Traceback" not in err
-    assert not out.exists() or _leftovers(out) == [], _leftovers(out)
+    assert _leftovers(tmp_path) == [], _leftovers(tmp_path)
 
 
 def _register_cmd(rig, rec, out) -> list[str]:

@@ -8,7 +8,7 @@ A RECORDING is a recording folder, or a text/CSV file listing one per line. Each
 ``OUT/<recording folder name>/`` in ``plantreg register``'s layout; ``OUT/batch.csv`` has one
 row per recording (status done / skipped / failed, the error, case shares, timings, files); a
 later run into the same OUT adds its rows to it (a recording run again gets its new row). One
-batch at a time per OUT (a lock file, ``OUT/.plantreg-batch.lock``, while it runs); a
+plantreg run at a time per OUT (:mod:`plantreg_gui.core.io.lock`: ``.OUT.plantreg-lock`` beside it); a
 ``--scheduler`` is asked who it is before OUT is created. A re-run skips recordings whose
 output is complete and made from the same inputs and parameters. Exit code 1 if any recording failed. Engine: :mod:`plantreg_gui.core.pipeline.batch`
 (and :mod:`~plantreg_gui.core.pipeline.batch_guard`).
@@ -88,6 +88,7 @@ class _Progress:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..core.io.lock import output_lock
     from ..core.io.paths import check_output_location
     from ..core.pipeline import batch, batch_guard
     from .register_cmd import load_rig_for_target, output_options, registration_params
@@ -104,17 +105,17 @@ def run(args: argparse.Namespace) -> int:
     check_output_location(out, "output", folder=True, into=True, inputs=[rig_path] + [j.recording for j in jobs])
     if args.scheduler:  # before OUT exists: a wrong address leaves nothing behind
         batch_guard.check_scheduler(args.scheduler)
-    made = not os.path.lexists(out)
-    out.mkdir(parents=True, exist_ok=True)
-    try:
-        with batch_guard.OutputLock(out):  # a second batch into OUT is refused while this one runs
+    with output_lock(out, what="batch output folder"):  # a second run writing OUT meanwhile is refused
+        made = not os.path.lexists(out)
+        out.mkdir(parents=True, exist_ok=True)
+        try:
             return _run_locked(args, jobs, out, rig_path, options, params)
-    finally:
-        if made:  # nothing was written (refused, or stopped before the first row): no empty OUT
-            try:
-                out.rmdir()
-            except OSError:
-                pass
+        finally:
+            if made:  # nothing was written (refused, or stopped before the first row): no empty OUT
+                try:
+                    out.rmdir()
+                except OSError:
+                    pass
 
 
 def _run_locked(args, jobs, out: Path, rig_path: Path, options, params) -> int:

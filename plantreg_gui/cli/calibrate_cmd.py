@@ -112,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
     from ..core.calibration.calibrate import MAX_RMS_PX, quality_problems
     from ..core.calibration.metrics import empty_depth_maps
     from ..core.calibration.report import calibrated_rig, report_files, run_session, write_calibration
+    from ..core.io.lock import output_lock
     from ..core.io.paths import check_output_location
     from ..core.progress import Reporter
 
@@ -135,47 +136,48 @@ def run(args: argparse.Namespace) -> int:
     for f, what in outputs.items():
         if f == args.report.absolute() or f == args.out.absolute() or os.path.lexists(f):
             check_output_location(f, what, overwrite=args.overwrite, inputs=inputs)
-    empty, every = empty_depth_maps(session)
-    if every and len(empty) == len(every):
-        raise InputError(f"none of the session's {len(every)} depth maps has a valid pixel (all 0 or NaN), e.g. "
-                         f"{empty[0]}; fix the depth export, or remove \"depth\" from session.json", session.path)
+    with output_lock(args.out, args.report, what="calibration output"):  # one run at a time (the tables follow the report)
+        empty, every = empty_depth_maps(session)
+        if every and len(empty) == len(every):
+            raise InputError(f"none of the session's {len(every)} depth maps has a valid pixel (all 0 or NaN), e.g. "
+                             f"{empty[0]}; fix the depth export, or remove \"depth\" from session.json", session.path)
 
-    options = None
-    if args.detector != "auto":
-        from ..core.calibration import DetectOptions
+        options = None
+        if args.detector != "auto":
+            from ..core.calibration import DetectOptions
 
-        stored = session.detect_options()
-        options = {}
-        for pose in session.poses:
-            for cam in session.cameras:
-                o = stored.get((pose.name, cam), DetectOptions())
-                options[(pose.name, cam)] = DetectOptions(o.invert, o.enhance, args.detector)
-    progress = Reporter(cli.StderrProgress(quiet=args.quiet))
-    detections, cal, report = run_session(session, excluded, options, roi, progress, known=known)
-    _print_summary(session, detections, cal, report)
-    for w in report.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    max_rms = MAX_RMS_PX if args.max_rms is None else args.max_rms
-    problems = quality_problems(cal, max_rms, report)
-    if problems:
-        raise InputError(f"calibration failed, nothing written: {'; '.join(problems)}. Check the board's columns "
-                         f"and rows (inner corners: {session.board.columns}x{session.board.rows} now) and square size, "
-                         "and the weak views above; --max-rms PX accepts larger errors", session.path)
-    uncertain = cal.uncertainty_problems()
-    if uncertain and not args.accept_uncertain:
-        raise InputError("calibration too uncertain, nothing written: " + "; ".join(uncertain)
-                         + ". The data do not determine this; add the views named, or keep it anyway (flagged in "
-                           "the rig and the report) with --accept-uncertain", session.path)
-    if uncertain:
-        cal.accepted_uncertain = list(uncertain)
-        report.accepted_uncertain = list(uncertain)
-        for u in uncertain:
-            print(f"warning: kept with --accept-uncertain: {u}", file=sys.stderr)
-    words = getattr(args, "argv", None)
-    command = "plantreg " + " ".join(shlex.quote(str(a)) for a in words) if words else None
-    rig = calibrated_rig(cal, session, report, roi, command, excluded)
-    # everything is computed: now write the rig, the report and its tables as one transaction
-    written = write_calibration(rig, args.out, report, args.report)
+            stored = session.detect_options()
+            options = {}
+            for pose in session.poses:
+                for cam in session.cameras:
+                    o = stored.get((pose.name, cam), DetectOptions())
+                    options[(pose.name, cam)] = DetectOptions(o.invert, o.enhance, args.detector)
+        progress = Reporter(cli.StderrProgress(quiet=args.quiet))
+        detections, cal, report = run_session(session, excluded, options, roi, progress, known=known)
+        _print_summary(session, detections, cal, report)
+        for w in report.warnings:
+            print(f"warning: {w}", file=sys.stderr)
+        max_rms = MAX_RMS_PX if args.max_rms is None else args.max_rms
+        problems = quality_problems(cal, max_rms, report)
+        if problems:
+            raise InputError(f"calibration failed, nothing written: {'; '.join(problems)}. Check the board's columns "
+                             f"and rows (inner corners: {session.board.columns}x{session.board.rows} now) and square size, "
+                             "and the weak views above; --max-rms PX accepts larger errors", session.path)
+        uncertain = cal.uncertainty_problems()
+        if uncertain and not args.accept_uncertain:
+            raise InputError("calibration too uncertain, nothing written: " + "; ".join(uncertain)
+                             + ". The data do not determine this; add the views named, or keep it anyway (flagged in "
+                               "the rig and the report) with --accept-uncertain", session.path)
+        if uncertain:
+            cal.accepted_uncertain = list(uncertain)
+            report.accepted_uncertain = list(uncertain)
+            for u in uncertain:
+                print(f"warning: kept with --accept-uncertain: {u}", file=sys.stderr)
+        words = getattr(args, "argv", None)
+        command = "plantreg " + " ".join(shlex.quote(str(a)) for a in words) if words else None
+        rig = calibrated_rig(cal, session, report, roi, command, excluded)
+        # everything is computed: now write the rig, the report and its tables as one transaction
+        written = write_calibration(rig, args.out, report, args.report)
 
     if roi is None and rig.depth_camera is not None:
         # a calibration cannot know where the ground is; registration meshes everything above it

@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
     from ..core.camera.rig import Rig
     from ..core.camera.record import landmark_record
     from ..core.data.recording import recording_inputs
+    from ..core.io.lock import output_lock
     from ..core.rigfit.rigfit import fit_rig_from_file, format_report, keep_not_worse, parse_free, parse_priors
 
     out: Path = args.out
@@ -101,45 +102,46 @@ def run(args: argparse.Namespace) -> int:
     reads = [f for key in landmarks.recordings for f in recording_inputs(landmarks.folder(key))]
     reads += [f for folder in args.recording for f in recording_inputs(folder)]
     check_output_rig(out, args.overwrite, [args.rig, args.landmarks, *reads])
-    if landmarks.count() > 0:
-        result = fit_rig_from_file(rig, landmarks, free=free, priors=priors, cameras=fit_cams,
-                                   max_median_px=args.max_median, snap_depth=not args.no_snap_depth)
-        fitted, report, warnings = result.rig, result.report, list(result.warnings)
-        method = "landmarks"
-    elif args.refine or args.silhouette:  # no points: refine from the images alone, starting from the start rig
-        landmarks.check_recordings()
-        fitted, report, warnings, method = rig, {"landmarks_used": 0}, [], ("refine" if args.refine else "start")
-    else:
-        raise InputError("the landmarks file has no points (add some, or pass --refine or --silhouette to fit "
-                         "from the images alone)", args.landmarks)
-    if args.refine or args.silhouette:
-        recordings, by_folder = _recordings(args, landmarks, fitted)  # read once for both
-    if args.refine:
-        # the refinement is its own module (core/rigfit/refine.py); imported only when asked for
-        from ..core.rigfit.refine import refine_rig
-        from ..core.progress import Reporter
+    with output_lock(out, what="output rig"):  # a second run writing RIG meanwhile is refused
+        if landmarks.count() > 0:
+            result = fit_rig_from_file(rig, landmarks, free=free, priors=priors, cameras=fit_cams,
+                                       max_median_px=args.max_median, snap_depth=not args.no_snap_depth)
+            fitted, report, warnings = result.rig, result.report, list(result.warnings)
+            method = "landmarks"
+        elif args.refine or args.silhouette:  # no points: refine from the images alone, starting from the start rig
+            landmarks.check_recordings()
+            fitted, report, warnings, method = rig, {"landmarks_used": 0}, [], ("refine" if args.refine else "start")
+        else:
+            raise InputError("the landmarks file has no points (add some, or pass --refine or --silhouette to fit "
+                             "from the images alone)", args.landmarks)
+        if args.refine or args.silhouette:
+            recordings, by_folder = _recordings(args, landmarks, fitted)  # read once for both
+        if args.refine:
+            # the refinement is its own module (core/rigfit/refine.py); imported only when asked for
+            from ..core.rigfit.refine import refine_rig
+            from ..core.progress import Reporter
 
-        rr = refine_rig(fitted, recordings, free=free, landmarks=by_folder,
-                        progress=Reporter(cli.StderrProgress(quiet=args.quiet)))
-        refined, w = keep_not_worse(fitted, rr.rig, rr.report.get("cameras", {}), "refinement")
-        fitted, method = refined, ("landmarks+refine" if report.get("landmarks_used") else "refine")
-        report["refine"] = rr.report
-        warnings += list(rr.warnings) + w
-    if args.silhouette:
-        before = fitted
-        fitted, method = _silhouette(args, fitted, recordings, by_folder, report, method)
-        fitted, w = keep_not_worse(before, fitted, report["silhouette"].get("cameras", {}), "silhouette fit")
-        warnings += w
-    previous = rig.extra.get("calibration")
-    landmark_record(
-        method, "plantreg fit-rig", report,
-        command="plantreg " + " ".join(getattr(args, "argv", []) or sys.argv[1:]),
-        start_rig=str(Path(args.rig).resolve()), landmarks_file=str(Path(args.landmarks).resolve()),
-        warnings=warnings,
-        **({"previous_method": previous.get("method")} if isinstance(previous, dict) and previous.get("method")
-           else {}),
-    ).store(fitted)
-    fitted.save(out)
+            rr = refine_rig(fitted, recordings, free=free, landmarks=by_folder,
+                            progress=Reporter(cli.StderrProgress(quiet=args.quiet)))
+            refined, w = keep_not_worse(fitted, rr.rig, rr.report.get("cameras", {}), "refinement")
+            fitted, method = refined, ("landmarks+refine" if report.get("landmarks_used") else "refine")
+            report["refine"] = rr.report
+            warnings += list(rr.warnings) + w
+        if args.silhouette:
+            before = fitted
+            fitted, method = _silhouette(args, fitted, recordings, by_folder, report, method)
+            fitted, w = keep_not_worse(before, fitted, report["silhouette"].get("cameras", {}), "silhouette fit")
+            warnings += w
+        previous = rig.extra.get("calibration")
+        landmark_record(
+            method, "plantreg fit-rig", report,
+            command="plantreg " + " ".join(getattr(args, "argv", []) or sys.argv[1:]),
+            start_rig=str(Path(args.rig).resolve()), landmarks_file=str(Path(args.landmarks).resolve()),
+            warnings=warnings,
+            **({"previous_method": previous.get("method")} if isinstance(previous, dict) and previous.get("method")
+               else {}),
+        ).store(fitted)
+        fitted.save(out)
     if report.get("landmarks_used"):
         print(format_report(report, worst=args.worst))
     if "refine" in report:

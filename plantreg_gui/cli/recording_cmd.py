@@ -41,6 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run_create(args: argparse.Namespace) -> int:
     from ..core.io.imageio import atomic_write_text, read_image
+    from ..core.io.lock import output_lock
     from ..core.io.paths import check_output_location
     from ..core.data.recording import MANIFEST, manifest_entries
 
@@ -72,17 +73,18 @@ def run_create(args: argparse.Namespace) -> int:
         raise InputError("recording folder is a file, not a folder", folder)
     inputs = [*images.values(), *([args.depth] if args.depth is not None else [])]
     check_output_location(manifest, MANIFEST, overwrite=args.overwrite, inputs=inputs)
-    # read every file now: a recording that cannot be read later is no use
-    for name, f in images.items():
-        read_image(f)
-    if args.depth is not None:
-        d = read_image(args.depth)
-        if d.ndim != 2:
-            raise InputError(f"depth map must be single-channel, got shape {d.shape}", args.depth)
-        if d.dtype.kind not in "uif":
-            raise InputError(f"depth map must hold numbers, got dtype {d.dtype}", args.depth)
-    folder.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(manifest, json.dumps(m, indent=2) + "\n")
+    with output_lock(manifest, what=MANIFEST):
+        # read every file now: a recording that cannot be read later is no use
+        for name, f in images.items():
+            read_image(f)
+        if args.depth is not None:
+            d = read_image(args.depth)
+            if d.ndim != 2:
+                raise InputError(f"depth map must be single-channel, got shape {d.shape}", args.depth)
+            if d.dtype.kind not in "uif":
+                raise InputError(f"depth map must hold numbers, got dtype {d.dtype}", args.depth)
+        folder.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(manifest, json.dumps(m, indent=2) + "\n")
     print(f"wrote {manifest}: " + ", ".join((["depth"] if "depth" in m else []) + list(images)))
     return 0
 

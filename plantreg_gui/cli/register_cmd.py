@@ -143,6 +143,7 @@ def registration_params(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     from .. import cli
     from ..core.data.recording import recording_inputs
+    from ..core.io.lock import output_lock
     from ..core.io.paths import check_output_location, resolve
     from ..core.pipeline.pipeline import register_recording
     from ..core.registration.cases import Area, Case
@@ -158,9 +159,10 @@ def run(args: argparse.Namespace) -> int:
     check_output_location(out, "output", folder=True, overwrite=args.overwrite,
                           inputs=[rig_path, *recording_inputs(recording)])
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
-    result = register_recording(rig, args.recording, args.target, out, params, options, overwrite=args.overwrite,
-                                inputs={"rig": rig_path.resolve(), "recording": recording,
-                                        "command": _command_line(args)}, progress=progress).result
+    with output_lock(out):  # a second run writing OUT meanwhile is refused (core/io/lock.py)
+        result = register_recording(rig, args.recording, args.target, out, params, options, overwrite=args.overwrite,
+                                    inputs={"rig": rig_path.resolve(), "recording": recording,
+                                            "command": _command_line(args)}, progress=progress).result
 
     H, W = result.shape
     n = H * W

@@ -44,6 +44,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run_create(args: argparse.Namespace) -> int:
     from ..core.rigfit.start import create_rig, parse_camera_spec
+    from ..core.io.lock import output_lock
     from .fit_rig_cmd import check_output_rig
 
     specs = [parse_camera_spec(t) for t in args.camera]
@@ -57,8 +58,9 @@ def run_create(args: argparse.Namespace) -> int:
         if len(v) != 6:
             raise InputError(f"--roi takes six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX in metres, got '{args.roi}'")
         roi = (v[:3], v[3:])
-    rig, warnings = create_rig(specs, args.depth_camera, args.depth_scale, roi)
-    rig.save(args.out)
+    with output_lock(args.out, what="output rig"):
+        rig, warnings = create_rig(specs, args.depth_camera, args.depth_scale, roi)
+        rig.save(args.out)
     for c in rig.cameras:
         print(f"  {c.name:<14} {c.modality:<13} {c.width}x{c.height}  fx {c.K[0, 0]:.1f} fy {c.K[1, 1]:.1f}  "
               f"centre ({c.center_rig[0]:+.3f}, {c.center_rig[1]:+.3f}, {c.center_rig[2]:+.3f}) m  "

@@ -403,7 +403,8 @@ def read_json(path: str | Path, what: str = "file") -> object:
     file and, for syntax errors, the line and column.
 
     Refused before parsing: anything but a readable regular file, files over
-    :data:`MAX_JSON_BYTES`; while parsing: nesting deeper than Python's recursion limit.
+    :data:`MAX_JSON_BYTES`; while parsing: nesting deeper than Python's recursion limit, a key
+    given twice in one object. UTF-8 (with or without a byte-order mark), UTF-16 and UTF-32 are read.
     """
     import json
 
@@ -412,7 +413,13 @@ def read_json(path: str | Path, what: str = "file") -> object:
     if size > MAX_JSON_BYTES:
         raise InputError(f"{_human(size)}, too large for a plantreg JSON file (limit {_human(MAX_JSON_BYTES)})", path)
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        # bytes: json detects UTF-8 (with or without the byte-order mark Windows editors write),
+        # UTF-16 and UTF-32 as RFC 8259 allows; a key given twice is refused (readers disagree on
+        # which one counts: Python's json keeps the last, others the first)
+        return json.loads(path.read_bytes(), object_pairs_hook=_no_duplicate_keys)
+    except _DuplicateKey as e:
+        raise InputError(f"key {e.args[0]!r} appears twice in one JSON object; JSON readers disagree on which "
+                         "one counts: keep one", path) from None
     except json.JSONDecodeError as e:
         raise InputError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})", path) from None
     except RecursionError:
@@ -421,6 +428,18 @@ def read_json(path: str | Path, what: str = "file") -> object:
         raise InputError(f"cannot read: not UTF-8 text ({e.reason} at byte {e.start})", path) from None
     except OSError as e:
         raise InputError(f"cannot read ({e.strerror or e})", path) from None
+
+
+class _DuplicateKey(ValueError):
+    pass
+
+
+def _no_duplicate_keys(pairs: list[tuple[str, object]]) -> dict:
+    d = dict(pairs)
+    if len(d) != len(pairs):
+        seen: set[str] = set()
+        raise _DuplicateKey(next(k for k, _ in pairs if k in seen or seen.add(k)))
+    return d
 
 
 def read_json_object(path: str | Path, what: str = "file") -> dict:

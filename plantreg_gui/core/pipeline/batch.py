@@ -209,6 +209,19 @@ def _rig_for(settings: BatchSettings):
     return _WorkerCache.rig
 
 
+def _said_once(path: Any, detail: str, recording: str) -> str:
+    """A failed row's error: the row names the recording already, so a file of it is named
+    relative to it (``thermal.tif: ...``) and the recording itself not again ("failed X: X: ...")."""
+    if not path:
+        return detail
+    a, rec = os.path.abspath(str(path)), os.path.abspath(str(recording))
+    if a == rec:
+        return detail
+    if a.startswith(rec.rstrip(os.sep) + os.sep):
+        return f"{os.path.relpath(a, rec)}: {detail}"
+    return f"{path}: {detail}"
+
+
 def run_job(settings: BatchSettings, job: Job) -> dict[str, Any]:
     """Register one recording into ``OUT/<job.name>``; returns its ``batch.csv`` row. Never raises
     for a bad recording (the row says ``failed`` and why)."""
@@ -222,11 +235,11 @@ def run_job(settings: BatchSettings, job: Job) -> dict[str, Any]:
         from ..errors import PlantregError
 
         if isinstance(e, PlantregError):
-            row["error"] = str(e)
+            row["error"] = _said_once(getattr(e, "path", None), getattr(e, "detail", None) or str(e), job.recording)
         elif isinstance(e, MemoryError):
             row["error"] = "out of memory"
         elif isinstance(e, OSError):
-            row["error"] = f"{e.filename + ': ' if e.filename else ''}{e.strerror or e}"
+            row["error"] = _said_once(e.filename, str(e.strerror or e), job.recording)
         else:  # a defect, not a user error: keep the type so it can be reported
             row["error"] = f"internal error ({type(e).__name__}: {e})"
     row["seconds_total"] = round(time.perf_counter() - t0, 3)

@@ -4,8 +4,8 @@
   ``identity`` request, within a time limit), before OUT is created: a web server on that port
   used to hang the batch for ever, and one that answered at once made Dask read "HTTP/1.0" as a
   frame length of 3 EiB (``MemoryError``).
-* :class:`OutputLock` holds ``OUT/.plantreg-batch.lock`` for a whole run, so that a second run
-  into the same OUT is refused instead of the last writer's ``batch.csv`` winning.
+* A second run into the same OUT is refused by the lock every writing command takes
+  (:func:`plantreg_gui.core.io.lock.output_lock`), instead of the last writer's ``batch.csv`` winning.
 * :func:`read_csv`, :func:`merge_rows`, :func:`write_csv`: ``batch.csv`` keeps the rows of earlier
   runs into OUT (a recording run again gets its new row).
 
@@ -24,8 +24,6 @@ from typing import Any
 from ..errors import InputError
 
 BATCH_CSV = "batch.csv"
-#: The lock file held in OUT while a batch writes there (:class:`OutputLock`).
-LOCK_NAME = ".plantreg-batch.lock"
 #: Seconds a Dask scheduler has to answer :func:`check_scheduler`.
 SCHEDULER_TIMEOUT_S = 10.0
 #: Columns of batch.csv before the per-camera case shares.
@@ -104,61 +102,6 @@ def check_scheduler(address: str, timeout: float | None = None) -> dict[str, Any
     return reply
 
 
-class OutputLock:
-    """``OUT/.plantreg-batch.lock``, held with ``fcntl.flock`` while one batch writes into OUT.
-
-    A second batch into the same OUT finds the lock taken and is refused (:class:`InputError`
-    naming the holder's process). The kernel releases the lock when its process ends however it
-    ends, so a lock file left by a killed run is recognised as free (by the lock, not by its age
-    or a pid that may have been reused) and taken over. Released and removed on every exit
-    path of the run (an exception, a signal). A context manager."""
-
-    def __init__(self, out: str | Path):
-        self.path = Path(out) / LOCK_NAME
-        self._fd: int | None = None
-
-    def __enter__(self) -> "OutputLock":
-        import fcntl
-
-        for _ in range(50):
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o644)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                try:
-                    holder = os.read(fd, 200).decode("utf-8", "replace").split()
-                finally:
-                    os.close(fd)
-                who = f" (process {holder[0]} on {holder[1]})" if len(holder) >= 2 else ""
-                raise InputError(f"another plantreg batch{who} is writing into this folder; wait for it to end, "
-                                 "or choose another --out", self.path.parent) from None
-            except BaseException:
-                os.close(fd)
-                raise
-            try:  # the previous holder may have removed the file between our open and our lock
-                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
-            except FileNotFoundError:
-                same = False
-            if not same:
-                os.close(fd)
-                continue
-            os.ftruncate(fd, 0)
-            os.write(fd, f"{os.getpid()} {socket.gethostname()}\n".encode())
-            self._fd = fd
-            return self
-        raise InputError("could not take the batch lock (its file keeps being replaced)", self.path)  # pragma: no cover
-
-    def __exit__(self, *exc) -> None:
-        if self._fd is None:
-            return
-        try:
-            self.path.unlink(missing_ok=True)  # while still holding it: nobody else has it now
-        finally:
-            os.close(self._fd)
-            self._fd = None
-
-
 # ---------------------------------------------------------------------- the table
 def read_csv(path: str | Path) -> list[dict[str, Any]]:
     """The rows of an existing ``batch.csv`` ([] if there is none). Raises :class:`InputError`
@@ -207,5 +150,5 @@ def write_csv(path: str | Path, rows: list[dict[str, Any]]) -> None:
     atomic_write_text(path, buf.getvalue())
 
 
-__all__ = ["BATCH_CSV", "LOCK_NAME", "SCHEDULER_TIMEOUT_S", "check_scheduler", "OutputLock", "read_csv", "merge_rows",
+__all__ = ["BATCH_CSV", "SCHEDULER_TIMEOUT_S", "check_scheduler", "read_csv", "merge_rows",
            "csv_columns", "write_csv"]
