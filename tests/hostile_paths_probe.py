@@ -510,10 +510,11 @@ VALUES = [
     ("manifest", "images", [], "images"), ("manifest", "images.thermal", 5, "thermal"),
     ("manifest", "images.thermal", None, "thermal"), ("manifest", "images.thermal", ["thermal.tif"], "thermal"),
     ("manifest", "depth", ["depth.png"], "depth"), ("manifest", "depth", 7, "depth"),
-    ("manifest", "images.nosuchcam", "thermal.tif", "nosuchcam"), ("manifest", "images.thermal", "/etc/passwd", "passwd"),
-    ("manifest", "images.thermal", "rgb.png", "rgb.png"), ("manifest", "depth", "ir.npy", "depth"),
+    ("manifest", "images.nosuchcam", "thermal.tif", "nosuchcam"), ("manifest", "images.thermal", "/etc/passwd", ("passwd", "image type")),
+    ("manifest", "images.thermal", "rgb.png", ("rgb.png", "thermal")), ("manifest", "depth", "ir.npy", ("ir.npy", "depth")),
     # session.json of calibrate
-    *[("session", "board.columns", v, "columns") for v in (NAN, 0, -9, "9", 1e308, 2.5, 1)],
+    *[("session", "board.columns", v, "columns") for v in (NAN, 0, -9, "9", 1e308, 2.5)],
+    ("session", "board.columns", 1, "inner corners"),
     *[("session", "board.square_size", v, "square") for v in (NAN, INF, 0, -0.04, 1e308, "0.04")],
     ("session", "board.type", "hexagon", "type"), ("session", "board", [], "board"), ("session", "board", _DELETE, "board"),
     ("session", "cameras", [], "cameras"), ("session", "cameras", {}, "cameras"), ("session", "cameras.ir", [], "ir"),
@@ -532,15 +533,18 @@ VALUES = [
     ("startrig", "cameras.0.K", [[NAN, 0, 1], [0, 1, 1], [0, 0, 1]], "K"), ("startrig", "cameras.0.width", 1e308, "width"),
     ("startrig", "depth", _DELETE, "depth"), ("startrig", "cameras.1.t", [INF, 0, 0], "t"),
     ("intrinsics", "cameras.0.K", [[NAN, 0, 1], [0, 1, 1], [0, 0, 1]], "K"), ("intrinsics", "cameras.0.width", 640, "640"),
-    ("intrinsics", "cameras.0.name", "rgb", "intr.json"), ("intrinsics", "cameras.0.dist", [1e308] * 5, "dist"),
+    ("intrinsics", "cameras.0.name", "rgb", None),  # its only camera: documented, valid
+    ("intrinsics", "cameras.0.dist", [1e308] * 5, "dist"),
     ("intrinsics", "cameras", [], "cameras"),
 ]
 for i, (fname, keypath, value, word) in enumerate(VALUES):
     def f(r, fname=fname, keypath=keypath, value=value, word=word):
         argv, file = JSON_FILES[fname](r); _edit(file, lambda d: _setkey(d, keypath, value))
-        return argv, (file.name, word)
+        if word is None:  # a valid value
+            return argv, None
+        return argv, (word if isinstance(word, tuple) else (file.name, word))  # a tuple: the file named is another
     tag = re.sub(r"[^A-Za-z0-9]+", "_", f"{keypath}_{'del' if value is _DELETE else json.dumps(value)[:12]}")
-    f.__name__ = f"val_{fname}_{tag}_{i}"; case()(f)
+    f.__name__ = f"val_{fname}_{tag}_{i}"; case("ok" if word is None else "refuse")(f)
 # a rig file list of a million numbers where a few are expected (parsed, then refused by key)
 @case()
 def val_rig_huge_dist(r):
@@ -597,7 +601,8 @@ IMAGE_CASES = {
     "thermal_float64": ("thermal.tif", lambda p: tifffile.imwrite(p, np.full((24, 32), 20.5, np.float64)), "ok", None),
     "thermal_rgba": ("thermal.tif", lambda p: tifffile.imwrite(p, np.full((24, 32, 4), 7, np.uint8)), "ok", None),
     "rgb_forged_100000": ("rgb.png", lambda p: _png_forged_size(p, 100000, 100000, 8, 2), "refuse", "rgb.png"),
-    "rgb_jpeg_named_png": ("rgb.png", lambda p: p.write_bytes(cv2.imencode(".jpg", np.zeros((60, 80, 3), np.uint8))[1].tobytes()), "refuse", "rgb.png"),
+    # PNG and JPEG are told apart by their signature, whatever the suffix (docs/errors.md): read as what it is
+    "rgb_jpeg_named_png": ("rgb.png", lambda p: p.write_bytes(cv2.imencode(".jpg", np.zeros((60, 80, 3), np.uint8))[1].tobytes()), "ok", None),
     "rgb_16bit": ("rgb.png", lambda p: cv2.imwrite(str(p), np.full((60, 80, 3), 4000, np.uint16)), "ok", None),
     "rgb_gray": ("rgb.png", lambda p: cv2.imwrite(str(p), np.full((60, 80), 7, np.uint8)), "ok", None),
     "rgb_crc_broken": ("rgb.png", lambda p: p.write_bytes(p.read_bytes()[:40] + b"\x00" + p.read_bytes()[41:]), "refuse", "rgb.png"),
@@ -677,7 +682,7 @@ for nm, extra, word in (("scale_nan", ("--depth-scale", "nan"), "scale"), ("scal
     f.__name__ = f"num_rigcreate_{nm}"; case()(f)
 @case("ok")
 def num_rigcreate_valid(r):
-    return _rig_create(r, "ir=infrared,640x576,f=504,rot=0", RC_OK, extra=("--roi", "-0.5,-0.5,0.2,0.5,0.5,1.2")), None
+    return _rig_create(r, "ir=infrared,640x576,f=504,rot=0", RC_OK, extra=("--roi=-0.5,-0.5,0.2,0.5,0.5,1.2",)), None
 for nm, extra, word in (("max_rms_neg", ("--max-rms", "-1"), "--max-rms"), ("max_rms_zero", ("--max-rms", "0"), "--max-rms"),
                         ("max_rms_nan", ("--max-rms", "nan"), "--max-rms"), ("max_rms_inf", ("--max-rms", "inf"), "--max-rms"),
                         ("roi_nan", ("--roi", "nan", "0", "0", "1", "1", "1"), "--roi"), ("roi_min_gt_max", ("--roi", "1", "1", "1", "0", "0", "0"), "--roi"),

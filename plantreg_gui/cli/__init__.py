@@ -16,7 +16,7 @@ from pathlib import Path
 from .. import __version__, prefer_one_blas_thread
 
 prefer_one_blas_thread()  # before numpy is first imported (the subcommands import it)
-from ..core.errors import Cancelled, PlantregError
+from ..core.errors import Cancelled, PlantregError, quiet_library_notes, show_path
 from ..core import signals
 from ..core.signals import Terminated  # noqa: F401 - raised by a terminating signal (docs/errors.md)
 
@@ -153,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         print("plantreg: error: standard output is closed; plantreg prints its results there (send them to "
               "/dev/null instead: >/dev/null)", file=sys.stderr)
         return 1
+    quiet_library_notes()  # and in every child process (signals.child_init)
     parser = build_parser(list(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     # the words of this command line, for provenance (sys.argv is someone else's when called in-process)
@@ -193,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
         _silence_stdio()
         return 128 + signal.SIGPIPE
     except OSError as e:  # disk full, no permission, a file where a folder should be: name it, no traceback
-        where = f"{e.filename}: " if e.filename else ""
+        where = f"{show_path(e.filename)}: " if e.filename else ""
         print(f"plantreg: error: {where}{e.strerror or e}", file=sys.stderr)
         return 1
     except Exception as e:

@@ -25,6 +25,11 @@ from pathlib import Path
 from ..core.errors import InputError
 
 
+#: The most local worker processes ``--workers`` may ask for (more than any workstation's cores;
+#: 10**20 was accepted and silently capped).
+MAX_WORKERS = 1024
+
+
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     from . import nonempty_path
     from .register_cmd import add_output_options, add_registration_options
@@ -97,8 +102,8 @@ def run(args: argparse.Namespace) -> int:
     options = output_options(args)
     load_rig_for_target(rig_path, args.target, options.parts)  # refuses a bad rig before any work
     params = registration_params(args)
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"--workers must be at least 1, got {args.workers}")
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
+        raise InputError(f"--workers must be a whole number from 1 to {MAX_WORKERS}, got {args.workers}")
     out = args.out.absolute()
     jobs = batch.plan(batch.expand_inputs(args.recordings), out)  # name clashes: refused before any work
     # OUT is written into (one folder per recording), never replaced as a whole
@@ -119,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_locked(args, jobs, out: Path, rig_path: Path, options, params) -> int:
+    from ..core.errors import one_line, show_path
     from ..core.pipeline import batch, batch_guard
 
     csv_path = out / batch_guard.BATCH_CSV
@@ -159,5 +165,5 @@ def _run_locked(args, jobs, out: Path, rig_path: Path, options, params) -> int:
           f"in {wall:.1f} s; wrote {csv_path}" + (f" (with {kept} row(s) of earlier runs)" if kept else ""))
     for r in sorted(rows.values(), key=lambda r: order[r["name"]]):
         if r["status"] == "failed":
-            print(f"  failed {r['recording']}: {r['error']}")
+            print(f"  failed {show_path(r['recording'])}: {one_line(r['error'])}")
     return 1 if counts["failed"] or len(rows) < len(jobs) else 0

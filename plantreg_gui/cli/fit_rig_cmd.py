@@ -44,7 +44,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="prior sigmas around the start rig: rotation (deg, 5), position (m, 0.05), focal "
                         "(relative, 0.05), principal (of the width, 0.03), k1 (0.2), click (px, 1), robust (px, 3); "
                         "e.g. 'focal=0.2' for a focal length from a data sheet")
-    p.add_argument("--max-median", type=float, default=10.0, metavar="PX",
+    from . import nonneg_int, positive_float
+
+    p.add_argument("--max-median", type=positive_float, default=10.0, metavar="PX",
                    help="refuse (write nothing, exit 1) when a camera's median landmark residual exceeds PX "
                         "(default 10)")
     p.add_argument("--no-snap-depth", action="store_true",
@@ -57,7 +59,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                         "as a term (core/rigfit/silhouette.py; see docs/fit-rig.md)")
     p.add_argument("--recording", action="append", type=Path, default=[], metavar="DIR",
                    help="more recordings for --refine / --silhouette (repeatable)")
-    p.add_argument("--worst", type=int, default=10, metavar="N", help="worst landmarks to list (default 10)")
+    p.add_argument("--worst", type=nonneg_int, default=10, metavar="N", help="worst landmarks to list (default 10)")
     p.add_argument("--overwrite", action="store_true", help="replace RIG if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(run=run)
@@ -87,8 +89,6 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--recording adds recordings for --refine or --silhouette; pass one of them too")
     free = parse_free(args.free)
     priors = parse_priors(args.prior)
-    if not (args.max_median > 0):
-        raise InputError(f"--max-median must be a positive number of pixels, got {args.max_median:g}")
     fit_cams = [c.strip() for c in args.fit.split(",") if c.strip()] if args.fit is not None else None
     if fit_cams is not None and not fit_cams:
         raise InputError("--fit names no camera")

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 from pathlib import Path
 
@@ -49,8 +48,13 @@ def run_create(args: argparse.Namespace) -> int:
     manifest = folder / MANIFEST
     if args.depth is None and not args.image:
         raise InputError("give --depth FILE and/or --image NAME=FILE")
-    if args.depth_scale is not None and not (args.depth_scale > 0 and math.isfinite(args.depth_scale)):
-        raise InputError(f"--depth-scale must be a positive number of metres per depth unit, got {args.depth_scale:g}")
+    if args.depth_scale is not None:
+        from ..core.validate import depth_scale
+
+        try:
+            depth_scale(args.depth_scale, "--depth-scale")
+        except ValueError as e:
+            raise InputError(str(e)) from None
     images: dict[str, Path] = {}
     for item in args.image:
         name, sep, f = item.partition("=")

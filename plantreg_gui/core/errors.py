@@ -24,7 +24,7 @@ class InputError(PlantregError):
         self.path = Path(path) if path is not None else None
         message = one_line(message)  # the promise is one line, whatever a library said
         self.detail = message
-        super().__init__(f"{self.path}: {message}" if self.path is not None else message)
+        super().__init__(f"{show_path(self.path)}: {message}" if self.path is not None else message)
 
 
 class Cancelled(PlantregError):
@@ -32,6 +32,14 @@ class Cancelled(PlantregError):
 
     def __init__(self, message: str = "cancelled by the user"):
         super().__init__(message)
+
+
+def show_path(path: str | Path) -> str:
+    """A path as a message shows it: control characters (a newline or a tab in a file name) as
+    escapes (``re\\nc``), so that the message stays one line and names the file unambiguously."""
+    import re
+
+    return re.sub(r"[\x00-\x1f\x7f]", lambda m: repr(m.group())[1:-1], str(path))
 
 
 def one_line(text: str) -> str:
@@ -42,3 +50,18 @@ def one_line(text: str) -> str:
     text = re.sub(r"OpenCV\([^)]*\)\s*\S+:\d+:\s*error:\s*", "", str(text))
     parts = [p.strip() for p in str(text).splitlines() if p.strip()]
     return "; ".join(parts)
+
+
+def quiet_library_notes() -> None:
+    """Silence the libraries' notes on stderr in a command-line process: numpy's floating-point
+    ones (``RuntimeWarning: overflow encountered in matmul``, two lines with a source line) and
+    tifffile's log lines about a malformed file (``<tifffile.TiffPages> invalid offset ...``). They
+    are not messages for the user (the promise is one line): hostile values are refused by
+    validation, naming the file and key, a bad file by its reader, naming the file and the
+    reason, and a doubtful result is told by plantreg's own ``warning:`` lines."""
+    import logging
+    import warnings
+
+    warnings.filterwarnings("ignore", message=r".*(overflow|invalid value|divide by zero|underflow) encountered",
+                            category=RuntimeWarning)
+    logging.getLogger("tifffile").setLevel(logging.ERROR + 1)  # its errors are raised to us as well

@@ -154,7 +154,11 @@ def deferred() -> Iterator[None]:
 def child_init() -> None:
     """In every child process we spawn: the same handling as the parent's CLI. A signal while the
     child runs a job unwinds the job (its temporary outputs are removed, the parent gets the
-    exception); while idle, the child exits with status 128 + signal and no traceback."""
+    exception); while idle, the child exits with status 128 + signal and no traceback. The
+    libraries' notes on stderr are silenced as in the CLI (:func:`~.errors.quiet_library_notes`)."""
+    from .errors import quiet_library_notes
+
+    quiet_library_notes()
     install()
 
 

@@ -243,9 +243,10 @@ def check_distortion(dist: np.ndarray, K: np.ndarray, width: int, height: int, k
     rd_in = float(min(np.abs(xs).min(), np.abs(ys).min())) if inside else 0.0
     r = np.linspace(0.0, MAX_DISTORTION_SCALE * rd_corner, 8001)[1:]
     s = radial_scale(dist, r)
-    rd = r * s
-    ok = np.isfinite(rd)
-    down = np.flatnonzero(~ok[1:] | ~ok[:-1] | (np.diff(rd) <= 0))
+    with np.errstate(all="ignore"):  # coefficients like 1e308 overflow: non-finite radii are refused below
+        rd = r * s
+        ok = np.isfinite(rd)
+        down = np.flatnonzero(~ok[1:] | ~ok[:-1] | (np.diff(rd) <= 0))
     first_fold = int(down[0]) if down.size else len(r) - 1
     reach_in = np.flatnonzero(ok & (rd >= rd_in))
     if rd_in > 0 and (not reach_in.size or first_fold < reach_in[0]):
@@ -282,3 +283,16 @@ def check_translation(t: np.ndarray, key: str) -> None:
 
 #: depth.scale (metres per depth unit): 1 for depth maps in metres; more is not a depth map.
 MAX_DEPTH_SCALE = 1000.0
+
+
+def depth_scale(v: Any, key: str) -> float:
+    """The one check of a depth scale (metres per depth unit) wherever one is given: the rig's
+    ``depth.scale``, a session's, a recording's ``depth_scale`` and the ``--depth-scale`` options:
+    a number in (0, :data:`MAX_DEPTH_SCALE`]."""
+    if not is_number(v):
+        raise ValueError(f"{key} must be a number (metres per depth unit), got {show(v)}")
+    f = float(v)
+    if not (0 < f <= MAX_DEPTH_SCALE):  # NaN fails too
+        raise ValueError(f"{key} must be positive and at most {MAX_DEPTH_SCALE:g} (metres per depth unit), "
+                         f"got {show(v)}")
+    return f

@@ -33,6 +33,11 @@ def _aruco_dictionary(name: str):
     return cv2.aruco.getPredefinedDictionary(const)
 
 
+#: Largest board square (or marker) side, metres: a calibration target with larger squares would
+#: not fit a phenotyping rig's view (a typical one has 20-60 mm).
+MAX_SQUARE_M = 1.0
+
+
 @dataclass
 class Board:
     """A planar calibration target.
@@ -167,9 +172,11 @@ class Board:
             except ValueError:
                 raise ValueError(f"board: {k} must be a whole number of inner corners (1 to 1000), "
                                  f"got {show(d[k])}") from None
-        number(d["square_size"], "board.square_size (metres)", positive=True)
-        if d.get("marker_size") is not None:
-            number(d["marker_size"], "board.marker_size (metres)", positive=True)
+        for k in ("square_size", "marker_size"):
+            if k == "square_size" or d.get(k) is not None:
+                if number(d[k], f"board.{k} (metres)", positive=True) > MAX_SQUARE_M:
+                    raise ValueError(f"board.{k} is {show(d[k])} m; the sanity bound is {MAX_SQUARE_M:g} m (metres: "
+                                     "millimetres by mistake?)")
         try:
             return cls(
                 type=str(d.get("type", "chessboard")),

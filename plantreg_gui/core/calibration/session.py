@@ -225,14 +225,13 @@ class Session:
             depth_camera = dd["camera"]
             if depth_camera not in cameras:
                 raise InputError(f"depth camera '{depth_camera}' is not among the cameras ({', '.join(cameras)})", path)
-            depth_scale = dd.get("scale", 0.001)
-            if isinstance(depth_scale, bool) or not isinstance(depth_scale, (int, float)):
-                raise InputError(f"depth.scale must be a number (metres per depth unit), got {show(depth_scale)}",
-                                 path)
-            depth_scale = float(depth_scale)
-            if not 0 < depth_scale < float("inf"):
-                raise InputError("depth.scale must be positive (metres per depth unit)", path)
-        review = d.get("review") or {}
+            from ..validate import depth_scale as check_scale
+
+            try:
+                depth_scale = check_scale(dd.get("scale", 0.001), "depth.scale")
+            except ValueError as e:
+                raise InputError(str(e), path) from None
+        review = d.get("review", {}) if d.get("review") is not None else {}
         if not isinstance(review, dict):
             raise InputError("\"review\" must be an object {\"excluded\": [\"POSE:CAMERA\", ...], \"options\": {...}}", path)
         if not isinstance(review.get("excluded", []), list):

@@ -121,13 +121,10 @@ class Rig:
             depth_camera = depth["camera"]
             if depth_camera not in names:
                 raise bad(f"depth camera '{depth_camera}' is not among the cameras ({', '.join(names)})")
-            scale = depth.get("scale", 0.001)
-            if not v.is_number(scale):
-                raise bad(f"depth.scale must be a number (metres per depth unit), got {v.show(scale)}")
-            scale = float(scale)
-            if not (0 < scale <= v.MAX_DEPTH_SCALE and np.isfinite(scale)):
-                raise bad(f"depth.scale must be positive and at most {v.MAX_DEPTH_SCALE:g} (metres per depth "
-                          f"unit), got {v.show(depth.get('scale'))}")
+            try:
+                scale = v.depth_scale(depth.get("scale", 0.001), "depth.scale")
+            except ValueError as e:
+                raise bad(str(e)) from None
         roi = d.get("roi", {})
         if not isinstance(roi, dict):
             raise bad(f"roi must be {{\"min\": [x, y, z], \"max\": [x, y, z]}}, got {v.show(roi)}")

@@ -65,7 +65,8 @@ class Recording:
         images: dict[str, np.ndarray] = {}
         for name, p in entries.items():  # names and paths checked before any image is read
             if rig is not None and name is not None and name not in rig.names:
-                raise InputError(f"camera '{name}' of the recording is not in the rig ({', '.join(rig.names)})", p)
+                raise InputError(f"images.{name}: camera '{name}' is not in the rig ({', '.join(rig.names)})",
+                                 manifest)
             what = "depth map" if name is None else f"image of camera '{name}'"
             check_input_file(p, f"{what} listed in {MANIFEST}")
         decoded = read_images(list(entries.values()), while_decoding)
@@ -83,9 +84,7 @@ class Recording:
             if depth.dtype.kind not in "uif":
                 raise InputError(f"depth map must hold real numbers, got dtype {depth.dtype}", p)
         extra = {k: v for k, v in m.items() if k not in ("depth", "images", "depth_scale")}
-        ds = m.get("depth_scale")
-        if ds is not None and (isinstance(ds, bool) or not isinstance(ds, (int, float)) or not 0 < ds < float("inf")):
-            raise InputError(f"depth_scale must be a positive number (metres per depth unit), got {ds!r}", manifest)
+        ds = m.get("depth_scale")  # checked by manifest_entries
         rec = cls(folder, depth, images, paths, extra, None if ds is None else float(ds))
         if rig is not None:
             rec.check(rig)
@@ -117,9 +116,10 @@ class Recording:
                     f"'{dcam.name}' is {dcam.width}x{dcam.height}",
                     p,
                 )
+            d = np.asarray(self.depth, dtype=np.float64)
             with np.errstate(invalid="ignore"):
-                if not np.any(np.asarray(self.depth, dtype=np.float64) > 0):
-                    raise InputError("depth map is empty (no pixel has a depth > 0)", p)
+                if not np.any(np.isfinite(d) & (d > 0)):
+                    raise InputError("depth map is empty (no pixel has a finite depth > 0)", p)
 
     def save(self, folder: str | Path, names: dict[str, str] | None = None) -> None:
         """Write the images (``.npy`` unless ``names`` gives file names) and the manifest."""
@@ -245,6 +245,8 @@ def manifest_entries(m: Any, manifest: Path) -> dict[str | None, Path]:
             if not isinstance(dep, str):
                 raise ValueError(f"depth must be a file name (a non-empty string) or null, got {v.show(dep)}")
             out[None] = manifest.parent / dep
+        if m.get("depth_scale") is not None:
+            v.depth_scale(m["depth_scale"], "depth_scale")
     except ValueError as e:
         raise InputError(str(e), manifest) from None
     return out

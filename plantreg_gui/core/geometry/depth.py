@@ -14,9 +14,9 @@ from .mesh import backproject_depth as back_project  # noqa: F401 (the one back-
 
 def to_metres(raw: np.ndarray, scale: float) -> np.ndarray:
     """Raw depth (H, W) -> metres, float32 (H, W); NaN where there is no measurement."""
-    d = np.asarray(raw).astype(np.float32) * np.float32(scale)
-    with np.errstate(invalid="ignore"):
-        d[~(d > 0)] = np.nan
+    with np.errstate(over="ignore", invalid="ignore"):
+        d = np.asarray(raw).astype(np.float32) * np.float32(scale)
+        d[~(np.isfinite(d) & (d > 0))] = np.nan  # an infinite depth is no measurement either
     return d
 
 

@@ -185,10 +185,29 @@ def _read_png_jpeg(path: Path, suffix: str) -> Callable[[], np.ndarray]:
                 return imagecodecs.png_decode(path.read_bytes())
             except MemoryError:
                 raise
-            except Exception:  # noqa: BLE001 - no imagecodecs, or a bad file: OpenCV's decoder says what is wrong
+            except Exception:  # noqa: BLE001 - no imagecodecs, or a bad file: said below
                 pass
+        if is_png:  # libpng inside OpenCV prints "libpng error: ..." on stderr for bad data: Pillow says it first
+            _pillow_pixels_check(path, kind)
         return _opencv_decode(path, kind)
     return decode
+
+
+def _pillow_pixels_check(path: Path, kind: str) -> None:
+    """Decode the file with Pillow (raising, never printing) and refuse it if its pixel data are
+    short or corrupt."""
+    from PIL import Image
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(path) as im:
+                im.load()
+    except Image.DecompressionBombError as e:
+        raise InputError(f"{kind} file claims an image beyond plantreg's sanity bound ({one_line(str(e))})",
+                         path) from None
+    except (OSError, SyntaxError, ValueError, EOFError) as e:
+        raise InputError(f"corrupt or truncated {kind} file ({one_line(str(e))})", path) from None
 
 
 def _opencv_decode(path: Path, kind: str) -> np.ndarray:

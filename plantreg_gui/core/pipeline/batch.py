@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
-from ..errors import InputError
+from ..errors import InputError, show_path
 from .batch_guard import BATCH_CSV, write_csv  # noqa: F401 - part of this module's interface
 
 #: Attempts of a job whose worker process died (the first run and one retry).
@@ -218,8 +218,9 @@ def _said_once(path: Any, detail: str, recording: str) -> str:
     if a == rec:
         return detail
     if a.startswith(rec.rstrip(os.sep) + os.sep):
-        return f"{os.path.relpath(a, rec)}: {detail}"
-    return f"{path}: {detail}"
+        rel = os.path.relpath(a, rec)
+        return detail if detail.startswith(f"{rel} ") else f"{show_path(rel)}: {detail}"
+    return f"{show_path(path)}: {detail}"
 
 
 def run_job(settings: BatchSettings, job: Job) -> dict[str, Any]:

@@ -84,6 +84,10 @@ class Priors:
 #: ``--prior`` keys -> :class:`Priors` fields
 PRIOR_KEYS = {"rotation": "rotation_deg", "position": "position_m", "focal": "focal_rel",
               "principal": "principal_rel", "k1": "k1", "click": "click_px", "robust": "robust_px"}
+#: the largest sigma of each ``--prior`` key: beyond it a prior no longer holds anything (and
+#: 1e308 overflowed the solver's loss)
+PRIOR_MAX = {"rotation": 180.0, "position": 100.0, "focal": 10.0, "principal": 10.0, "k1": 100.0,
+             "click": 1000.0, "robust": 1000.0}
 
 
 def parse_priors(spec: str | None, base: Priors | None = None) -> Priors:
@@ -102,8 +106,8 @@ def parse_priors(spec: str | None, base: Priors | None = None) -> Priors:
             val = float(v)
         except ValueError:
             raise InputError(f"--prior {k}: '{v}' is not a number") from None
-        if not (val > 0 and math.isfinite(val)):
-            raise InputError(f"--prior {k}: must be a positive number, got '{v}'")
+        if not (0 < val <= PRIOR_MAX[k]):
+            raise InputError(f"--prior {k}: must be a positive number up to {PRIOR_MAX[k]:g}, got '{v.strip()}'")
         setattr(pr, PRIOR_KEYS[k], val)
     return pr
 

@@ -267,8 +267,12 @@ def create_rig(specs: list[CameraSpec], depth_camera: str, depth_scale: float = 
     d = specs[names.index(depth_camera)]
     if d.rot_deg != 0 or np.any(d.at != 0):
         raise InputError(f"the depth camera '{depth_camera}' defines the rig frame: give it rot=0 and no at=")
-    if not (depth_scale > 0 and math.isfinite(depth_scale)):
-        raise InputError(f"--depth-scale must be a positive number of metres per depth unit, got {depth_scale:g}")
+    from .. import validate
+
+    try:
+        depth_scale = validate.depth_scale(depth_scale, "--depth-scale")
+    except ValueError as e:
+        raise InputError(str(e)) from None
     cams, warnings = [], []
     for s in specs:
         c, w = make_camera(s)
@@ -283,5 +287,23 @@ def create_rig(specs: list[CameraSpec], depth_camera: str, depth_scale: float = 
         if not np.all(hi > lo):
             raise InputError("--roi: every max must be larger than its min")
         rig.roi_min, rig.roi_max = lo, hi
+    _check_as_read(rig, specs)
     CalibrationRecord("start", "plantreg rig create", details={"warnings": warnings}).store(rig)
     return rig, warnings
+
+
+def _check_as_read(rig: Rig, specs: list[CameraSpec]) -> None:
+    """Refuse a rig its reader would refuse (``Rig.from_dict``: camera names, sizes, focal lengths,
+    positions, the region of interest and their sanity bounds, docs/errors.md) -- one rule for
+    what a rig file may hold, whoever writes it -- naming the option that gave the value."""
+    import re
+
+    try:
+        Rig.from_dict(rig.to_dict())
+    except InputError as e:
+        def option(m: re.Match) -> str:
+            return f"--camera {specs[int(m.group(1))].name!r}: " if int(m.group(1)) < len(specs) else m.group(0)
+
+        text = re.sub(r"cameras\[(\d+)\]\.?", option, e.detail)
+        text = re.sub(r"^roi\.?", "--roi: ", text).replace("depth.scale", "--depth-scale")
+        raise InputError(text) from None
