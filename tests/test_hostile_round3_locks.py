@@ -158,3 +158,15 @@ def test_one_output_spelled_two_ways_shares_one_lock(tmp_path):
     (tmp_path / "real").mkdir()
     os.symlink("real", tmp_path / "link")
     assert lock_path(tmp_path / "link" / "o.json") == lock_path(tmp_path / "real" / "x" / ".." / "o.json")
+
+
+def test_an_output_name_near_the_length_limit_still_has_a_lock(tmp_path):
+    """A 250-character output name (which plantreg writes) leaves no room for the lock's prefix and
+    suffix: its lock file name is shortened, and still differs from a sibling's of the same start."""
+    from plantreg_gui.core.io.lock import lock_path, output_lock
+
+    a, b = tmp_path / ("o" * 249 + "a"), tmp_path / ("o" * 249 + "b")
+    assert lock_path(a) != lock_path(b) and len(lock_path(a).name) <= 255
+    with output_lock(a), output_lock(b):
+        assert lock_path(a).is_file() and lock_path(b).is_file()
+    assert list(tmp_path.iterdir()) == []

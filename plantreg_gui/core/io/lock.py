@@ -4,7 +4,8 @@ writes takes on its outputs (``register``, ``batch``, ``calibrate``, ``fit-rig``
 outputs are in place.
 
 The lock of an output ``P`` is the hidden file ``.NAME.plantreg-lock`` beside it (``NAME`` is
-``P``'s name after following symbolic links, so two spellings of one output share one lock),
+``P``'s name after following symbolic links, so two spellings of one output share one lock; a
+name too long for that is shortened to 48 characters and a hash of the whole),
 held with ``fcntl.flock``. A second run that wants the same output finds the lock taken and is
 refused with one line naming the output and the holder (process id, host, command); it has
 written nothing by then. The kernel releases a lock when its process ends however it ends, so a
@@ -41,7 +42,12 @@ def lock_path(out: str | Path) -> Path:
     from .paths import resolve
 
     r = resolve(out, "output path")
-    return r.parent / f".{r.name}{LOCK_SUFFIX}"
+    name = f".{r.name}{LOCK_SUFFIX}"
+    if len(name.encode()) > 255:  # a name near the file system's limit: shortened, kept unique
+        import hashlib
+
+        name = f".{r.name[:48]}.{hashlib.sha1(r.name.encode()).hexdigest()[:12]}{LOCK_SUFFIX}"
+    return r.parent / name
 
 
 def _holder_text() -> str:
