@@ -545,6 +545,18 @@ for i, (fname, keypath, value, word) in enumerate(VALUES):
         return argv, (word if isinstance(word, tuple) else (file.name, word))  # a tuple: the file named is another
     tag = re.sub(r"[^A-Za-z0-9]+", "_", f"{keypath}_{'del' if value is _DELETE else json.dumps(value)[:12]}")
     f.__name__ = f"val_{fname}_{tag}_{i}"; case("ok" if word is None else "refuse")(f)
+# whole numbers beyond a float (Python parses them exactly, then float() overflows) and beyond
+# Python's 4300-digit parsing limit, in a key each file's reader uses
+BIG_KEYS = {"rig": "cameras.0.width", "manifest": "depth_scale", "session": "board.columns",
+            "landmarks": "version", "startrig": "cameras.0.height", "intrinsics": "cameras.0.width"}
+for fname, keypath in BIG_KEYS.items():
+    for digits in (400, 5000):
+        def f(r, fname=fname, keypath=keypath, digits=digits):
+            argv, file = JSON_FILES[fname](r)
+            _edit(file, lambda d: _setkey(d, keypath, 123456789))
+            file.write_text(file.read_text().replace("123456789", "1" + "0" * (digits - 1), 1))
+            return argv, (file.name, str(digits))
+        f.__name__ = f"bigint_{fname}_{digits}"; case()(f)
 # a rig file list of a million numbers where a few are expected (parsed, then refused by key)
 @case()
 def val_rig_huge_dist(r):
@@ -842,6 +854,29 @@ def newline_rc_missing_depth(r):
     _imgs(r); return rc(r / "rec", "--depth", str(r / "de\npth.png")), "pth.png"
 
 
+# -- file names that are not UTF-8 (Python holds their bytes as surrogates): read, written, printed
+NOT_UTF8 = os.fsdecode(b"re\xffc")
+@case("ok")
+def bytes_out_folder(r):
+    rig, rec = mkrec(r); return reg(rig, rec, r / NOT_UTF8), None
+@case("ok")
+def bytes_recording_folder(r):
+    rig, rec = mkrec(r); shutil.move(rec, r / NOT_UTF8); return reg(rig, r / NOT_UTF8, r / "out"), None
+@case("ok")
+def bytes_batch(r):
+    rig, rec = mkrec(r); shutil.move(rec, r / NOT_UTF8); return bat(rig, r / ("o" + NOT_UTF8), r / NOT_UTF8), None
+@case("ok")
+def bytes_recording_create(r):
+    _imgs(r); os.rename(r / "ir.png", r / (NOT_UTF8 + ".png"))
+    return rc(r / NOT_UTF8, "--image", f"ir={r / (NOT_UTF8 + '.png')}"), None
+@case()
+def bytes_missing_image(r):
+    rig, rec = mkrec(r); _manifest(rec, thermal=NOT_UTF8 + ".tif"); return reg(rig, rec, r / "out"), "re"
+@case("ok")
+def bytes_fit_out(r):
+    rig, rec = mkfit(r); return fit(rig, r / "landmarks.json", r / (NOT_UTF8 + ".json")), None
+
+
 def snapshot(root):
     out = {}
     for dp, dn, fn in os.walk(root):
@@ -879,10 +914,10 @@ def run_case(name, f, expect):
         cmd = ["setpriv", "--bounding-set=-dac_override,-dac_read_search", *cmd]
     if stdout == "close":
         import shlex
-        p = subprocess.run(["bash", "-c", " ".join(map(shlex.quote, cmd)) + " >&-"], stderr=subprocess.PIPE, text=True, cwd=cwd, timeout=300)
+        p = subprocess.run(["bash", "-c", " ".join(map(shlex.quote, cmd)) + " >&-"], stderr=subprocess.PIPE, text=True, errors="surrogateescape", cwd=cwd, timeout=300)
         out = ""
     else:
-        p = subprocess.run(cmd, stdout=stdout, stderr=subprocess.PIPE, text=True, cwd=cwd, timeout=300, preexec_fn=pre)
+        p = subprocess.run(cmd, stdout=stdout, stderr=subprocess.PIPE, text=True, errors="surrogateescape", cwd=cwd, timeout=300, preexec_fn=pre)
         out = p.stdout or ""
     err = p.stderr + ("" if argv[0] != "batch" else (p.stdout or ""))
     after = snapshot(r)
@@ -914,7 +949,7 @@ def run_case(name, f, expect):
             elif p.returncode == 2 and len(lines) >= 2 and lines[0].startswith("usage:") and ": error: " in lines[-1]:
                 lines = lines[-1:]  # argparse's usage + one error line naming the option, exit 2
             if argv[0] == "batch":  # a summary line, then one "failed RECORDING: why" line per recording
-                lines = [l for l in lines if l.lstrip().startswith(("failed", "plantreg:"))]
+                lines = [l for l in lines if l.lstrip().startswith(("failed", "plantreg"))]
                 if any(len(str(w)) > 8 and l.count(str(w)) > 1 for w in need for l in lines if "failed" in l[:9]):
                     lines = lines * 2  # the recording named twice ("failed X: X: ..."): vague
             if len(lines) != 1 or miss or ".part" in err or "XXXX" in err:

@@ -270,3 +270,35 @@ def test_a_failed_batch_row_names_the_recording_once(tmp_path):
     assert loop.count(str(tmp_path / "L")) == 1 and "symbolic link loop" in loop, loop
     newline = next(line for line in failed if "re\\nc" in line)
     assert "thermal.tif: image file is empty" in newline and newline.count("re\\nc") == 1, newline
+
+
+# ---------------------------------------------------------------------- numbers and names beyond the usual
+@pytest.mark.parametrize("digits", [400, 5000])
+@pytest.mark.parametrize("which", ["rig", "recording.json"])
+def test_whole_numbers_beyond_a_float_are_refused(tmp_path, which, digits):
+    """A JSON integer of 400 digits ended in ``OverflowError: int too large to convert to float``,
+    one of 5000 in Python's own ``ValueError: Exceeds the limit (4300 digits)``: tracebacks."""
+    rig, rec = _write_inputs(tmp_path)
+    f, key = (rig, "width") if which == "rig" else (rec / "recording.json", "depth_scale")
+    if which == "rig":
+        _edit(f, lambda d: d["cameras"][0].update(width=123456789))
+    else:
+        _edit(f, lambda d: d.update(depth_scale=123456789))
+    f.write_text(f.read_text().replace("123456789", "1" + "0" * (digits - 1)))
+    _refused_unchanged(tmp_path, _register(rig, rec, tmp_path / "out"), f, f"{digits} digits")
+
+
+def test_a_recording_folder_name_that_is_not_utf8_is_registered_and_tabled(tmp_path):
+    """A folder name with a byte that is not UTF-8 (Python holds it as a surrogate): batch ended in
+    ``UnicodeEncodeError`` writing batch.csv, after registering. The table now names the folder by
+    its own bytes."""
+    import os
+
+    rig, rec = _write_inputs(tmp_path)
+    odd = tmp_path / os.fsdecode(b"re\xffc")
+    shutil.move(rec, odd)
+    r = _run(["batch", "--rig", rig, "--target", "ir", "--out", tmp_path / "out", "--workers", "1", "--quiet", odd],
+             tmp_path, errors="surrogateescape")
+    _ok(r)
+    table = (tmp_path / "out" / "batch.csv").read_bytes()
+    assert b"re\xffc,done" in table and (tmp_path / "out" / odd.name / "summary.json").is_file()

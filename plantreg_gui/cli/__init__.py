@@ -154,6 +154,10 @@ def main(argv: list[str] | None = None) -> int:
               "/dev/null instead: >/dev/null)", file=sys.stderr)
         return 1
     quiet_library_notes()  # and in every child process (signals.child_init)
+    try:  # a file name that is not UTF-8 is printed as its own bytes (any locale), never a UnicodeEncodeError
+        sys.stdout.reconfigure(errors="surrogateescape")
+    except (AttributeError, ValueError):  # not a text stream of ours (captured in a test)
+        pass
     parser = build_parser(list(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     # the words of this command line, for provenance (sys.argv is someone else's when called in-process)

@@ -423,7 +423,8 @@ def read_json(path: str | Path, what: str = "file") -> object:
 
     Refused before parsing: anything but a readable regular file, files over
     :data:`MAX_JSON_BYTES`; while parsing: nesting deeper than Python's recursion limit, a key
-    given twice in one object. UTF-8 (with or without a byte-order mark), UTF-16 and UTF-32 are read.
+    given twice in one object, a whole number of more than 300 digits. UTF-8 (with or without a
+    byte-order mark), UTF-16 and UTF-32 are read.
     """
     import json
 
@@ -435,10 +436,13 @@ def read_json(path: str | Path, what: str = "file") -> object:
         # bytes: json detects UTF-8 (with or without the byte-order mark Windows editors write),
         # UTF-16 and UTF-32 as RFC 8259 allows; a key given twice is refused (readers disagree on
         # which one counts: Python's json keeps the last, others the first)
-        return json.loads(path.read_bytes(), object_pairs_hook=_no_duplicate_keys)
+        return json.loads(path.read_bytes(), object_pairs_hook=_no_duplicate_keys, parse_int=_bounded_int)
     except _DuplicateKey as e:
         raise InputError(f"key {e.args[0]!r} appears twice in one JSON object; JSON readers disagree on which "
                          "one counts: keep one", path) from None
+    except _HugeNumber as e:
+        raise InputError(f"holds a whole number of {e.args[0]} digits, beyond any value plantreg reads (and beyond "
+                         "a float: 1e308)", path) from None
     except json.JSONDecodeError as e:
         raise InputError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})", path) from None
     except RecursionError:
@@ -451,6 +455,19 @@ def read_json(path: str | Path, what: str = "file") -> object:
 
 class _DuplicateKey(ValueError):
     pass
+
+
+class _HugeNumber(ValueError):
+    pass
+
+
+def _bounded_int(text: str) -> int:
+    """A JSON integer; one of more than 300 digits is refused (it cannot become a float, which
+    every numeric check does, and Python refuses to parse more than 4300 digits at all)."""
+    digits = len(text.lstrip("-"))
+    if digits > 300:
+        raise _HugeNumber(digits)
+    return int(text)
 
 
 def _no_duplicate_keys(pairs: list[tuple[str, object]]) -> dict:
@@ -543,8 +560,11 @@ def has_write_bits(folder: str | Path) -> bool:
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:
+    """Write ``text`` as UTF-8, atomically. A file name that is not UTF-8 (Python holds its bytes
+    as surrogates, ``re\\udcffc``) is written back as its own bytes, so the text names the file
+    that exists (``batch.csv``'s recording column)."""
     with atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+        tmp.write_text(text, encoding="utf-8", errors="surrogateescape")
 
 
 def write_png(path: str | Path, img: np.ndarray) -> None:

@@ -43,10 +43,10 @@ def lock_path(out: str | Path) -> Path:
 
     r = resolve(out, "output path")
     name = f".{r.name}{LOCK_SUFFIX}"
-    if len(name.encode()) > 255:  # a name near the file system's limit: shortened, kept unique
+    if len(os.fsencode(name)) > 255:  # a name near the file system's limit: shortened, kept unique
         import hashlib
 
-        name = f".{r.name[:48]}.{hashlib.sha1(r.name.encode()).hexdigest()[:12]}{LOCK_SUFFIX}"
+        name = f".{r.name[:48]}.{hashlib.sha1(os.fsencode(r.name)).hexdigest()[:12]}{LOCK_SUFFIX}"
     return r.parent / name
 
 
