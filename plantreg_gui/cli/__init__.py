@@ -17,6 +17,7 @@ from .. import __version__, prefer_one_blas_thread
 
 prefer_one_blas_thread()  # before numpy is first imported (the subcommands import it)
 from ..core.errors import Cancelled, PlantregError, quiet_library_notes, show_path
+from ..core.io.paths import remember_reads
 from ..core import signals
 from ..core.signals import Terminated  # noqa: F401 - raised by a terminating signal (docs/errors.md)
 
@@ -164,6 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     args.argv = list(sys.argv[1:] if argv is None else argv)
     # SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGALRM, SIGXCPU ... unwind like Ctrl-C (core/signals.py)
     old_handlers = signals.install()
+    remember_reads()  # whatever a command reads is one of its inputs: never one of its outputs
     try:
         stdout, sys.stdout = sys.stdout, _NamedStdout(sys.stdout)
         try:
@@ -210,6 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         raise
     finally:
         signals.uninstall(old_handlers)
+        remember_reads(False)
 
 
 def entry() -> None:

@@ -95,6 +95,28 @@ def resolve(path: str | Path, what: str = "path") -> Path:
         raise InputError(f"{what} {_os_problem(e)}", path) from None
 
 
+#: Every file and folder this command has read so far (resolved), when :func:`remember_reads` was
+#: called (the command line: everything a command reads is one of its inputs). An output is never
+#: one of them, even where a command's own list of its inputs misses one (``calibrate
+#: --intrinsics cam=RIG.json --out RIG.json --overwrite`` replaced the file it had read). The
+#: desktop app does not keep it: over a session it reads much that is not an input of an export.
+_reads: set[Path] | None = None
+
+
+def remember_reads(on: bool = True) -> None:
+    """From now on note every input path checked here (see :data:`_reads`), starting afresh;
+    ``on=False``: stop (the command has ended)."""
+    global _reads
+    _reads = set() if on else None
+
+
+def _note_read(path: str | Path) -> None:
+    if _reads is not None:
+        r = _resolved_or_none(path)
+        if r is not None:
+            _reads.add(r)
+
+
 def _resolved_or_none(path: str | Path) -> Path | None:
     try:
         return Path(path).resolve() if "\x00" not in str(path) else None
@@ -124,6 +146,7 @@ def check_input_file(path: str | Path, what: str = "file") -> Path:
         raise InputError(f"{what} is not readable (permission denied)", path) from None
     except OSError as e:
         raise InputError(f"{what} cannot be read ({e.strerror or e})", path) from None
+    _note_read(path)
     return path
 
 
@@ -135,6 +158,7 @@ def check_input_folder(path: str | Path, what: str = "folder") -> Path:
         raise InputError(f"{what} does not exist", path)
     if not stat.S_ISDIR(st.st_mode):
         raise InputError(f"{what} is {_kind(st.st_mode)}, not a folder", path)
+    _note_read(path)
     return path
 
 
@@ -170,8 +194,9 @@ def check_output_location(out: str | Path, what: str = "output", *, folder: bool
                           overwrite: bool = False, inputs: Iterable[str | Path] = (), into: bool = False) -> Path:
     """Validate an output path before any expensive work; raises :class:`InputError` naming it.
 
-    Refused, besides :func:`check_destination`: a path that is one of ``inputs`` (files or
-    folders, compared after following links), or a folder holding one of them; the current
+    Refused, besides :func:`check_destination`: a path that is one of ``inputs`` or of the paths
+    the command has read so far (:func:`remember_reads`; files or folders, compared after
+    following links), or a folder holding one of them; the current
     folder or one above it (replacing it would pull the ground from under the shell); an
     existing output unless ``overwrite`` (a non-empty folder when ``folder``, any file
     otherwise); a mount point to be replaced; a location where no file can be created (probed by
@@ -182,9 +207,12 @@ def check_output_location(out: str | Path, what: str = "output", *, folder: bool
     """
     out = check_destination(out, what, folder=folder)
     out_r = resolve(out, f"{what} path")
-    for p in inputs:
+    given = list(inputs)
+    # what was read besides the given inputs: never the output; inside an output folder only when
+    # that folder is replaced (not ``into``: batch writes beside a list file kept in OUT)
+    for p, inside_counts in [*((p, True) for p in given), *((p, not into) for p in sorted(_reads or ()))]:
         p_r = _resolved_or_none(p)
-        if p_r is not None and (p_r == out_r or out_r in p_r.parents):
+        if p_r is not None and (p_r == out_r or (inside_counts and out_r in p_r.parents)):
             inside = "" if p_r == out_r else ", which is inside it"
             raise InputError(f"the {what} would replace an input of this command ({p}{inside}); choose a location "
                              "outside the inputs (--overwrite never replaces an input)", out)
@@ -235,5 +263,5 @@ def temp_beside(final: str | Path, *, folder: bool = False, suffix: str = ".part
         raise OSError(e.errno, e.strerror or str(e), str(final)) from None
 
 
-__all__ = ["check_path_text", "stat_or_none", "resolve", "check_input_file", "check_input_folder",
+__all__ = ["remember_reads", "check_path_text", "stat_or_none", "resolve", "check_input_file", "check_input_folder",
            "check_destination", "check_output_location", "temp_beside"]
