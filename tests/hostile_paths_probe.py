@@ -649,6 +649,17 @@ for nm, writer in (("zero_bytes", lambda p: p.write_bytes(b"")), ("truncated", l
         a = _cal(r); img = sorted((r / "s" / "pose_01").glob("ir.*"))[0]; writer(img); return a, img.name
     f.__name__ = f"img_session_{nm}"; case()(f)
 
+def _swap(rig_rec, out):
+    """(rig, rec), out -> (rig, out, rec): bat()'s order."""
+    return rig_rec[0], out, rig_rec[1]
+
+
+def _option_cases(prefix, make, table):
+    """Cases ``PREFIX_NAME`` for (NAME, extra command-line words, culprit word): ``make(r, extra)`` -> argv."""
+    for nm, extra, word in table:
+        def f(r, extra=extra, word=word):
+            return make(r, extra), word
+        f.__name__ = f"{prefix}_{nm}"; case()(f)
 # -- hostile numbers on the command line
 def _rig_create(r, *cams, extra=()):
     return ["rig", "create", str(r / "new.json"), "--depth-camera", "ir",
@@ -684,29 +695,23 @@ def num_rigcreate_dup_names(r):
 @case()
 def num_rigcreate_depth_cam_missing(r):
     return ["rig", "create", str(r / "new.json"), "--depth-camera", "nosuch", "--camera", RC_OK], "nosuch"
-for nm, extra, word in (("scale_nan", ("--depth-scale", "nan"), "scale"), ("scale_zero", ("--depth-scale", "0"), "scale"),
+_option_cases("num_rigcreate", lambda r, extra: _rig_create(r, "ir=infrared,640x576,f=504,rot=0", RC_OK, extra=extra), (("scale_nan", ("--depth-scale", "nan"), "scale"), ("scale_zero", ("--depth-scale", "0"), "scale"),
                         ("scale_neg", ("--depth-scale", "-1"), "scale"), ("scale_inf", ("--depth-scale", "inf"), "scale"),
                         ("roi_nan", ("--roi", "nan,0,0,1,1,1"), "roi"), ("roi_inf", ("--roi", "0,0,0,inf,1,1"), "roi"),
                         ("roi_min_gt_max", ("--roi", "1,1,1,0,0,0"), "roi"), ("roi_five", ("--roi", "0,0,0,1,1"), "roi"),
-                        ("roi_1e308", ("--roi", "-1e308,0,0,1e308,1,1"), "roi")):
-    def f(r, extra=extra, word=word):
-        return _rig_create(r, "ir=infrared,640x576,f=504,rot=0", RC_OK, extra=extra), word
-    f.__name__ = f"num_rigcreate_{nm}"; case()(f)
+                        ("roi_1e308", ("--roi", "-1e308,0,0,1e308,1,1"), "roi")))
 @case("ok")
 def num_rigcreate_valid(r):
     return _rig_create(r, "ir=infrared,640x576,f=504,rot=0", RC_OK, extra=("--roi=-0.5,-0.5,0.2,0.5,0.5,1.2",)), None
-for nm, extra, word in (("max_rms_neg", ("--max-rms", "-1"), "--max-rms"), ("max_rms_zero", ("--max-rms", "0"), "--max-rms"),
+_option_cases("num_cal", lambda r, extra: _cal(r, *extra), (("max_rms_neg", ("--max-rms", "-1"), "--max-rms"), ("max_rms_zero", ("--max-rms", "0"), "--max-rms"),
                         ("max_rms_nan", ("--max-rms", "nan"), "--max-rms"), ("max_rms_inf", ("--max-rms", "inf"), "--max-rms"),
                         ("roi_nan", ("--roi", "nan", "0", "0", "1", "1", "1"), "--roi"), ("roi_min_gt_max", ("--roi", "1", "1", "1", "0", "0", "0"), "--roi"),
                         ("roi_1e308", ("--roi", "-1e308", "-1", "0", "1e308", "1", "1"), "--roi"),
                         ("exclude_garbage", ("--exclude", "nocolon"), "nocolon"), ("exclude_unknown", ("--exclude", "pose_99:ir"), "pose_99"),
                         ("intrinsics_nosep", ("--intrinsics", "ir"), "--intrinsics"), ("intrinsics_unknown_cam", ("--intrinsics", "zz=x.json"), "zz"),
                         ("intrinsics_missing_file", ("--intrinsics", "ir=/nonexistent.json"), "nonexistent.json"),
-                        ("intrinsics_devzero", ("--intrinsics", "ir=/dev/zero"), "/dev/zero")):
-    def f(r, extra=extra, word=word):
-        return _cal(r, *extra), word
-    f.__name__ = f"num_cal_{nm}"; case()(f)
-for nm, extra, word in (("max_median_nan", ("--max-median", "nan"), "--max-median"), ("max_median_neg", ("--max-median", "-1"), "--max-median"),
+                        ("intrinsics_devzero", ("--intrinsics", "ir=/dev/zero"), "/dev/zero")))
+_option_cases("num_fit", lambda r, extra: fit(mkfit(r)[0], r / "landmarks.json", r / "o.json", *extra), (("max_median_nan", ("--max-median", "nan"), "--max-median"), ("max_median_neg", ("--max-median", "-1"), "--max-median"),
                         ("max_median_zero", ("--max-median", "0"), "--max-median"), ("max_median_inf", ("--max-median", "inf"), "--max-median"),
                         ("worst_neg", ("--worst", "-1"), "--worst"), ("worst_huge", ("--worst", "99999999999999999999999"), "--worst"),
                         ("prior_nan", ("--prior", "rotation=nan"), "rotation"), ("prior_neg", ("--prior", "focal=-1"), "focal"),
@@ -714,43 +719,28 @@ for nm, extra, word in (("max_median_nan", ("--max-median", "nan"), "--max-media
                         ("prior_1e308", ("--prior", "robust=1e308"), "robust"), ("prior_unknown", ("--prior", "colour=1"), "colour"),
                         ("prior_novalue", ("--prior", "rotation"), "rotation"), ("prior_twoeq", ("--prior", "rotation=5=6"), "rotation"),
                         ("free_unknown", ("--free", "zoom"), "zoom"), ("free_unknown_cam", ("--free", "nosuch:focal"), "nosuch"),
-                        ("fit_unknown_cam", ("--fit", "nosuch"), "nosuch"), ("fit_empty", ("--fit", ","), "--fit")):
-    def f(r, extra=extra, word=word):
-        rig, rec = mkfit(r); return fit(rig, r / "landmarks.json", r / "o.json", *extra), word
-    f.__name__ = f"num_fit_{nm}"; case()(f)
-for nm, extra, word in (("edge_nan", ("--edge-angle", "nan"), "--edge-angle"), ("edge_neg", ("--edge-angle", "-5"), "edge"),
+                        ("fit_unknown_cam", ("--fit", "nosuch"), "nosuch"), ("fit_empty", ("--fit", ","), "--fit")))
+_option_cases("num_reg", lambda r, extra: reg(*mkrec(r), r / "out", *extra), (("edge_nan", ("--edge-angle", "nan"), "--edge-angle"), ("edge_neg", ("--edge-angle", "-5"), "edge"),
                         ("edge_1e308", ("--edge-angle", "1e308"), "edge"), ("edge_zero", ("--edge-angle", "0"), "edge"),
                         ("edge_90", ("--edge-angle", "90"), "edge"), ("jump_neg", ("--flying-jump", "-1"), "flying"),
                         ("jump_zero", ("--flying-jump", "0"), "flying"), ("jump_inf", ("--flying-jump", "inf"), "--flying-jump"),
                         ("denoise_neg", ("--denoise-size", "-1"), "denoise"), ("denoise_even", ("--denoise-size", "4"), "denoise"),
                         ("denoise_huge", ("--denoise-size", "1000000001"), "denoise"), ("mixed_neg", ("--mixed-radius", "-1"), "mixed"),
                         ("mixed_1e308", ("--mixed-radius", "1e308"), "mixed"), ("outputs_bogus", ("--outputs", "bogus"), "bogus"),
-                        ("outputs_empty", ("--outputs", ""), "--outputs"), ("outputs_commas", ("--outputs", ",,"), "--outputs")):
-    def f(r, extra=extra, word=word):
-        rig, rec = mkrec(r); return reg(rig, rec, r / "out", *extra), word
-    f.__name__ = f"num_reg_{nm}"; case()(f)
+                        ("outputs_empty", ("--outputs", ""), "--outputs"), ("outputs_commas", ("--outputs", ",,"), "--outputs")))
 @case()
 def num_reg_target_empty(r):
     rig, rec = mkrec(r); a = reg(rig, rec, r / "out"); a[a.index("--target") + 1] = ""; return a, "target"
 @case()
 def num_reg_target_unknown(r):
     rig, rec = mkrec(r); a = reg(rig, rec, r / "out"); a[a.index("--target") + 1] = "nosuch"; return a, "nosuch"
-for nm, extra, word in (("workers_zero", ("--workers", "0"), "--workers"), ("workers_neg", ("--workers", "-3"), "--workers"),
+_option_cases("num_batch", lambda r, extra: bat(*_swap(mkrec(r), r / "out"), *extra), (("workers_zero", ("--workers", "0"), "--workers"), ("workers_neg", ("--workers", "-3"), "--workers"),
                         ("workers_huge", ("--workers", "100000000000000000000"), "--workers"), ("workers_nan", ("--workers", "nan"), "--workers"),
-                        ("edge_nan", ("--edge-angle", "nan"), "--edge-angle"), ("scheduler_garbage", ("--scheduler", "not an address"), "--scheduler")):
-    def f(r, extra=extra, word=word):
-        rig, rec = mkrec(r); return bat(rig, r / "out", rec, *extra), word
-    f.__name__ = f"num_batch_{nm}"; case()(f)
-for nm, extra, word in (("seed_neg", ("--seed", "-1"), "--seed"), ("seed_huge", ("--seed", str(2 ** 64)), "--seed"),
-                        ("seed_nan", ("--seed", "nan"), "--seed"), ("size_bogus", ("--size", "huge"), "--size")):
-    def f(r, extra=extra, word=word):
-        return ["demo", str(r / "d"), "--quiet", *extra], word
-    f.__name__ = f"num_demo_{nm}"; case()(f)
-for nm, extra, word in (("depth_scale_nan", ("--depth-scale", "nan"), "--depth-scale"), ("depth_scale_neg", ("--depth-scale", "-1"), "--depth-scale"),
-                        ("depth_scale_inf", ("--depth-scale", "inf"), "--depth-scale"), ("depth_scale_1e308", ("--depth-scale", "1e308"), "--depth-scale")):
-    def f(r, extra=extra, word=word):
-        _imgs(r); return rc(r / "rec", "--depth", str(r / "depth.png"), *extra), word
-    f.__name__ = f"num_rc_{nm}"; case()(f)
+                        ("edge_nan", ("--edge-angle", "nan"), "--edge-angle"), ("scheduler_garbage", ("--scheduler", "not an address"), "--scheduler")))
+_option_cases("num_demo", lambda r, extra: ["demo", str(r / "d"), "--quiet", *extra], (("seed_neg", ("--seed", "-1"), "--seed"), ("seed_huge", ("--seed", str(2 ** 64)), "--seed"),
+                        ("seed_nan", ("--seed", "nan"), "--seed"), ("size_bogus", ("--size", "huge"), "--size")))
+_option_cases("num_rc", lambda r, extra: _imgs(r) or rc(r / "rec", "--depth", str(r / "depth.png"), *extra), (("depth_scale_nan", ("--depth-scale", "nan"), "--depth-scale"), ("depth_scale_neg", ("--depth-scale", "-1"), "--depth-scale"),
+                        ("depth_scale_inf", ("--depth-scale", "inf"), "--depth-scale"), ("depth_scale_1e308", ("--depth-scale", "1e308"), "--depth-scale")))
 
 # -- permissions: run without root's override of permission bits (setpriv drops CAP_DAC_*)
 NOCAP = "__NOCAP__"

@@ -285,7 +285,7 @@ def _recording_deep(rig, rec, root):
 
 def _recording_camera_not_in_rig(rig, rec, root):
     _manifest(rec, lidar="ir.npy")
-    return rec / "ir.npy", ["camera 'lidar'", "not in the rig"]
+    return rec / "recording.json", ["images.lidar", "camera 'lidar'", "not in the rig"]  # where the name is
 
 
 def _rig_deep(rig, rec, root):

@@ -120,13 +120,14 @@ class _FileLock:
     def release(self) -> None:
         if self._fd is None:
             return
-        with signals.deferred():
-            try:
-                self.path.unlink(missing_ok=True)  # while still holding it: nobody else has it now
-            finally:
-                os.close(self._fd)
-                self._fd = None
-            self._remove_made()
+        # not under signals.deferred(): a terminating signal is what often brings us here, and
+        # deferred() refuses to start once the process is ending; later signals are ignored then
+        try:
+            self.path.unlink(missing_ok=True)  # while still holding it: nobody else has it now
+        finally:
+            os.close(self._fd)
+            self._fd = None
+        self._remove_made()
 
     def _remove_made(self) -> None:
         for d in self._made:  # folders made only to hold the lock, if nothing else went there
