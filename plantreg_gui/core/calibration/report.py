@@ -98,7 +98,11 @@ def write_calibration(rig: Rig | None, rig_path: str | Path | None, report: Cali
         stale = [p for p in report_files(rp)[1:] if p not in texts]
     if rig is not None and rig_path is not None:
         texts[Path(rig_path)] = json.dumps(rig.to_dict(), indent=2) + "\n"
-    with atomic_files(list(texts), remove=stale) as tmps:
+    from ..io.lock import output_lock
+
+    # the one output lock (the wizard's save too; re-entrant under plantreg calibrate's own)
+    locked = [p for p in (rig_path, report_path) if p is not None]
+    with output_lock(*locked, what="calibration output"), atomic_files(list(texts), remove=stale) as tmps:
         for final, text in texts.items():
             try:
                 tmps[final].write_text(text, encoding="utf-8")

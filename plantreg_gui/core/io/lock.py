@@ -1,7 +1,7 @@
 """One plantreg run per output at a time: :func:`output_lock`, the one lock every command that
 writes takes on its outputs (``register``, ``batch``, ``calibrate``, ``fit-rig``, ``rig create``,
-``recording create``, ``demo``, the desktop app's export), from before its long work until its
-outputs are in place.
+``recording create``, ``demo``, the desktop app's export, the calibration wizard's save), from
+before its long work until its outputs are in place.
 
 The lock of an output ``P`` is the hidden file ``.NAME.plantreg-lock`` beside it (``NAME`` is
 ``P``'s name after following symbolic links, so two spellings of one output share one lock; a
