@@ -569,6 +569,11 @@ def val_manifest_many_cameras(r):
     argv, file = _j_manifest(r); _edit(file, lambda d: d["images"].update({f"c{i}": "thermal.tif" for i in range(5000)}))
     return argv, ("recording.json", "c0")
 @case()
+def val_landmarks_too_many_points(r):
+    argv, file = _j_landmarks(r)
+    _edit(file, lambda d: [v.update(points=v["points"] * 500) for v in d["recordings"].values()])
+    return argv, ("landmarks.json", "10000")
+@case()
 def json_rig_oversize(r):
     argv, file = _j_rig(r); file.write_bytes(b'{"cameras": [' + b"0," * (33 << 20) + b'0]}'); return argv, "rig.json"
 

@@ -302,3 +302,12 @@ def test_a_recording_folder_name_that_is_not_utf8_is_registered_and_tabled(tmp_p
     _ok(r)
     table = (tmp_path / "out" / "batch.csv").read_bytes()
     assert b"re\xffc,done" in table and (tmp_path / "out" / odd.name / "summary.json").is_file()
+
+
+def test_a_landmarks_file_of_tens_of_thousands_of_points_is_refused(fit_copy):  # noqa: F811
+    """12 points repeated to 30,000 per recording: fit-rig ran for many minutes (a hang to its
+    user); landmarks are clicked by hand, so a file beyond 10,000 points is refused at once."""
+    f = fit_copy / "landmarks.json"
+    _edit(f, lambda d: [v.update(points=v["points"] * 2500) for v in d["recordings"].values()])
+    _refused_unchanged(fit_copy, ["fit-rig", "--rig", fit_copy / "start.json", "--landmarks", f, "--out",
+                                  fit_copy / "o.json", "--quiet"], f, "10000 points")

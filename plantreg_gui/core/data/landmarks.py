@@ -30,6 +30,8 @@ from ..io.paths import check_input_folder
 
 FORMAT = "plantreg.landmarks"
 VERSION = 1
+#: The most points a landmarks file may hold (all recordings together).
+MAX_POINTS = 10000
 
 
 @dataclass
@@ -116,9 +118,15 @@ class LandmarkSet:
             raise bad("\"recordings\" must be an object {RECORDING_FOLDER: {\"points\": [...]}}")
         out: dict[str, list[Landmark]] = {}
         rextra: dict[str, dict[str, Any]] = {}
+        total = 0
         for key, r in recs.items():
             if not isinstance(r, dict) or not isinstance(r.get("points"), list):
                 raise bad(f"recording '{key}': expected {{\"points\": [...]}}")
+            total += len(r["points"])
+            if total > MAX_POINTS:
+                raise bad(f"holds more than {MAX_POINTS} points (at recording '{key}'); landmarks are clicked by "
+                          "hand, a few dozen per recording: a file this large is not a landmarks file (and its fit "
+                          "would run for hours)")
             pts = []
             for i, p in enumerate(r["points"]):
                 where = f"recording '{key}', point {i}"
