@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_location(out, "output", folder=True, into=True, inputs=[rig_path] + [j.recording for j in jobs])
     if args.scheduler:  # before OUT exists: a wrong address leaves nothing behind
         batch_guard.check_scheduler(args.scheduler)
-    with output_lock(out, what="batch output folder"):  # a second run writing OUT meanwhile is refused
+    with output_lock(out, what="batch output folder", into=True):  # a second run writing OUT meanwhile is refused
         made = not os.path.lexists(out)
         out.mkdir(parents=True, exist_ok=True)
         try:

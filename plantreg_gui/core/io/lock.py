@@ -37,11 +37,16 @@ _held: dict[Path, int] = {}  # lock file -> depth, in this process
 _held_guard = threading.Lock()
 
 
-def lock_path(out: str | Path) -> Path:
-    """The lock file of the output ``out``: ``.NAME.plantreg-lock`` in its folder, links followed."""
+def lock_path(out: str | Path, into: bool = False) -> Path:
+    """The lock file of the output ``out``: ``.NAME.plantreg-lock`` in its folder, links followed.
+    ``into``: ``out`` is an existing folder written into, never replaced (``batch``); where its
+    parent folder cannot be written (a read-only project folder holding a writable OUT) the lock
+    is ``OUT/.plantreg-lock`` instead."""
     from .paths import resolve
 
     r = resolve(out, "output path")
+    if into and r.is_dir() and not os.access(r.parent, os.W_OK):
+        return r / LOCK_SUFFIX
     name = f".{r.name}{LOCK_SUFFIX}"
     if len(os.fsencode(name)) > 255:  # a name near the file system's limit: shortened, kept unique
         import hashlib
@@ -139,13 +144,14 @@ class _FileLock:
 
 
 @contextmanager
-def output_lock(*outputs: str | Path, what: str = "output") -> Iterator[None]:
-    """Hold the lock of every output in ``outputs`` (files or folders) for the block; raises
-    :class:`InputError` naming the output when another run holds one (nothing is held then).
-    Locks are taken in a fixed order (no two runs wait on each other: a taken lock refuses at once)."""
+def output_lock(*outputs: str | Path, what: str = "output", into: bool = False) -> Iterator[None]:
+    """Hold the lock of every output in ``outputs`` (files or folders; ``into``: see
+    :func:`lock_path`) for the block; raises :class:`InputError` naming the output when another
+    run holds one (nothing is held then). Locks are taken in a fixed order (no two runs wait on
+    each other: a taken lock refuses at once)."""
     paths: dict[Path, Path] = {}
     for out in outputs:
-        paths.setdefault(lock_path(out), Path(out))
+        paths.setdefault(lock_path(out, into), Path(out))
     with ExitStack() as stack:
         for lp in sorted(paths):
             stack.enter_context(_one(lp, paths[lp], what))
