@@ -190,7 +190,7 @@ def test_an_all_infinite_float_depth_map_is_empty(tmp_path):
 
 
 def test_a_float_depth_map_with_inf_holes_registers_like_nan_holes(tmp_path):
-    """Guard for the rule above: +inf where nothing was measured gives the result NaN there gives."""
+    """+inf where nothing was measured gives the result NaN there gives (it was taken for a depth)."""
     rig, rec = _write_inputs(tmp_path)
     d = np.full((H, W), 1.0, np.float32)
     d[::3] = np.nan
