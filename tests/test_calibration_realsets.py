@@ -113,25 +113,18 @@ def test_lepton_zed_calibrates_to_opencvs_figures_and_reports_its_uncertainty(sh
     stereoCalibrate on our ordered corners, 73.4 mm; 69 mm with the one ZED view OpenCV finds
     and we do not). The pairs are hand-held and only
     approximately simultaneous, so the thermal camera's residuals in the joint fit are ~3x its
-    own; the small board near the image centre leaves the ZED's focal length known to 0.9 % only
-    (projection uncertainty 4.78 px, limit 2.9; docs/calibration.md); such a rig is refused naming
-    the camera and the figure, writes nothing, and --accept-uncertain keeps it with the flag."""
+    own. The small board near the image centre leaves the ZED's focal length known to 0.9 % only,
+    traded against the boards' distance: the rig is judged where it works (mrcal's figure over
+    0.8-1.25x the boards' distance, docs/calibration.md) and calibrates with the default limits."""
     s = lepton_session(shared_data, tmp_path / "session")
     out = tmp_path / "out"
     out.mkdir()
     args = ["calibrate", str(s), "--out", str(out / "rig.json"), "--report", str(out / "report.json"), "--quiet"]
     code = main(args)
     err = capsys.readouterr().err
-    assert "RMS error" not in err and "disagree" not in err, err  # no quality failure at the default limits
-    if code != 0:
-        assert list(out.iterdir()) == [] and "Traceback" not in err
-        assert "camera 'rgb'" in err or "camera 'thermal'" in err
-        assert "--accept-uncertain" in err
-        code = main(args + ["--accept-uncertain"])
-        assert code == 0
-        rig = Rig.load(out / "rig.json")
-        assert rig.extra["calibration"]["accepted_uncertain"]
-        assert json.loads((out / "report.json").read_text())["accepted_uncertain"]
+    assert code == 0, err
+    assert "RMS error" not in err and "disagree" not in err and "Traceback" not in err, err
+    assert "accepted_uncertain" not in Rig.load(out / "rig.json").extra["calibration"]
     rig = Rig.load(out / "rig.json")
     report = json.loads((out / "report.json").read_text())
     ref = _opencv_repository_pipeline(s)
