@@ -12,6 +12,7 @@ a time against plantreg's full calibration of all 92 images:
 * ``weak`` (d): the views the report lists as weak left out (all, then each Kinect one).
 * ``prior`` (e): without the principal point prior.
 * ``folds``: the lens model chosen with other splits of the views into cross-validation folds.
+* ``poses`` (not by default: 54 calibrations): each pose left out in turn.
 * ``--toolbox-mat``: the toolbox's full_set.mat (PyojinKim/Kinect_calibration_toolbox,
   dataset_original/full_set.mat; not in the shared data): its RGB-only calibration (calib0) and
   plantreg's solver on the toolbox's own corners.
@@ -153,8 +154,27 @@ def models(run: Run) -> None:
                 run.line(f"  kinect {mk}, external {me}")
 
 
+def _stereo(run: Run, corners: dict) -> str:
+    """OpenCV on the poses both cameras saw: the Kinect alone, then ``stereoCalibrate`` with every
+    intrinsic free (started from each camera's own ``calibrateCamera``)."""
+    obj = run.s.board.object_points().astype(np.float32)
+    shared = sorted(p for p, c in corners if c == "external")
+    fit = {}
+    for cam in ("kinect", "external"):
+        pts = [corners[(p, cam)].astype(np.float32) for p in shared]
+        fit[cam] = cv2.calibrateCamera([obj] * len(shared), pts, run.dets[(shared[0], cam)].image_size, None, None)
+    st = cv2.stereoCalibrate([obj] * len(shared), *[[corners[(p, c)].astype(np.float32) for p in shared]
+                                                     for c in ("kinect", "external")],
+                             *[a.copy() for c in ("kinect", "external") for a in fit[c][1:3]],  # changed in place
+                             run.dets[(shared[0], "kinect")].image_size, flags=0,
+                             criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-9))
+    return (f"{len(shared)} shared poses: kinect alone {fit['kinect'][1][0, 0]:.2f}, stereoCalibrate kinect "
+            f"{st[1][0, 0]:.2f}, external {st[3][0, 0]:.1f}")
+
+
 def joint(run: Run) -> None:
     run.line("  kinect alone", cams=["kinect"])
+    print("  OpenCV on plantreg's corners, " + _stereo(run, {k: d.corners for k, d in run.dets.items()}))
     orig = B.bundle_adjust
 
     def no_noise(*a, **k):
@@ -197,6 +217,11 @@ def folds(run: Run) -> None:
             print(f"  {cam}, fold split rng_seed {seed}: {ch.model.name} (cross-validated px: {cv})", flush=True)
 
 
+def poses(run: Run) -> None:
+    for p in sorted({k[0] for k in run.dets}):
+        run.line(f"  without {p}", excluded={k for k in run.dets if k[0] == p})
+
+
 def toolbox(run: Run, mat: Path) -> None:
     import scipy.io as sio
 
@@ -227,7 +252,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="herrera_fx_") as tmp:
         run = Run(Session.load(herrera_session(a.data, Path(tmp) / "herrera")), herrera_reference(a.data))
         run.line("plantreg")
-        steps = {"corners": corners, "models": models, "joint": joint, "weak": weak, "prior": prior, "folds": folds}
+        steps = {"corners": corners, "models": models, "joint": joint, "weak": weak, "prior": prior, "folds": folds,
+                 "poses": poses}
         for w in a.what.split(","):
             print(w)
             steps[w](run)
