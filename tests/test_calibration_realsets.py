@@ -43,7 +43,7 @@ def test_herrera_symmetric_board_against_the_published_calibration(herrera_run, 
     images) to 1059.73 (docs/calibration.md). Against that RGB-only figure: within 0.1 % and 3 of
     our reported sigmas; against the published one within 0.3 %. The Kinect's lens model is on a
     knife edge here: the rational model predicts held-out views as well (0.220 against 0.221 px with
-    these folds, 3-5 % better with most other splits) and gives fx 1059.9 with the pose 1.4 mm off;
+    these folds, 4-5 % better with each of seeds 1-7) and gives fx 1059.9 with the pose 1.4 mm off;
     a change to the cross-validation that flips it fails this test on the pose."""
     code, tmp = herrera_run
     assert code == 0
