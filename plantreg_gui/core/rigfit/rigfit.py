@@ -283,6 +283,48 @@ def depth_jump(depth_m: np.ndarray, uv: np.ndarray, z: float, ground_z: float | 
             "edge or through a notch"), float(zs)
 
 
+@dataclass(frozen=True)
+class DepthCheck:
+    """What a landmark's depth pixel gives the fit (:func:`check_landmark_depth`).
+
+    ``status``: ``"ok"`` (the surface under the click), ``"snapped"`` (the click read a surface
+    behind the one beside it and was put onto the nearer one), ``"left out"`` (the same, with
+    snapping off) or ``"no depth"``. ``read_m``: the depth read under the click (nan without
+    one); ``z_m``: the depth the fit uses (nan when left out or none); ``reason``: why, for
+    anything but ``"ok"``."""
+
+    status: str
+    z_m: float
+    read_m: float
+    reason: str = ""
+
+    @property
+    def used(self) -> bool:
+        return math.isfinite(self.z_m)
+
+    @property
+    def snapped_mm(self) -> float:
+        """How far nearer the snapped depth is than the one read (mm; nan unless snapped)."""
+        return 1000.0 * (self.read_m - self.z_m) if self.status == "snapped" else math.nan
+
+
+def check_landmark_depth(depth_m: np.ndarray, uv: np.ndarray, ground_z: float | None = None, snap: bool = True
+                         ) -> DepthCheck:
+    """The depth a landmark at the depth pixel ``uv`` (2,) gets in a fit, from the depth map
+    ``depth_m`` (H, W) metres: :func:`landmark_depth`, then :func:`depth_jump` against the
+    surface beside it (``ground_z``: the rig's ground plane depth), snapped onto that surface
+    (``snap``) or left out. The one place the fit, the CLI report and the landmark page decide it."""
+    z, reason = landmark_depth(depth_m, uv)
+    if not np.isfinite(z):
+        return DepthCheck("no depth", math.nan, math.nan, reason)
+    jump, z_snap = depth_jump(depth_m, uv, z, ground_z)
+    if not jump:
+        return DepthCheck("ok", z, z)
+    if snap:
+        return DepthCheck("snapped", z_snap, z, jump)
+    return DepthCheck("left out", math.nan, z, jump + "; left out (--no-snap-depth)")
+
+
 def _nearest(mask: np.ndarray, i: int, j: int) -> float:
     vv, uu = np.nonzero(mask)
     return float(np.min(np.hypot(vv - i, uu - j))) if len(vv) else math.inf
@@ -463,20 +505,16 @@ def _collect(rig: Rig, recordings: Sequence[RecordingLandmarks], cameras: set[st
             cams = {c: uv for c, uv in lm.cameras.items() if c != dname and (cameras is None or c in cameras)}
             if not cams:
                 continue
-            z, reason = landmark_depth(rec.depth_m, lm.depth_uv)
-            if np.isfinite(z):
-                jump, z_snap = depth_jump(rec.depth_m, lm.depth_uv, z, rig.ground_z)
-                if jump and rec.snap_depth:
-                    rejected.append({"recording": rec.name, "index": li, "note": lm.note,
-                                     "depth_uv": [float(v) for v in lm.depth_uv], "reason": jump,
-                                     "depth_m": float(z), "snapped_to_m": z_snap})
-                    z = z_snap
-                elif jump:
-                    z, reason = math.nan, jump + "; left out (--no-snap-depth)"
-            if not np.isfinite(z):
+            chk = check_landmark_depth(rec.depth_m, lm.depth_uv, rig.ground_z, rec.snap_depth)
+            if chk.status == "snapped":
                 rejected.append({"recording": rec.name, "index": li, "note": lm.note,
-                                 "depth_uv": [float(v) for v in lm.depth_uv], "reason": reason})
+                                 "depth_uv": [float(v) for v in lm.depth_uv], "reason": chk.reason,
+                                 "depth_m": chk.read_m, "snapped_to_m": chk.z_m})
+            if not chk.used:
+                rejected.append({"recording": rec.name, "index": li, "note": lm.note,
+                                 "depth_uv": [float(v) for v in lm.depth_uv], "reason": chk.reason})
                 continue
+            z = chk.z_m
             L = len(duv)
             duv.append(lm.depth_uv)
             zs.append(z)

@@ -1,0 +1,182 @@
+"""The landmark page shows how the fit takes each landmark's depth (issue 23): on the surface
+under the click, snapped onto a nearer surface beside it, or left out -- with a switch for
+snapping that means what ``fit-rig --no-snap-depth`` means, kept in the Qt-free session.
+
+Ground truth: the demo rig and a synthetic plant. One landmark is clicked one pixel past a
+leaf's edge, where the depth camera sees the ground; the point meant is the leaf's edge, i.e.
+the leaf's plane (the triangle beside the click) met by the click's ray. Its camera pixel is
+that true point projected by the true rig, so a fit that takes the leaf's depth fits it, one
+that takes the ground's does not.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from plantreg_gui.core.camera.rig import Rig
+from plantreg_gui.core.data.landmarks import Landmark, LandmarkSet
+from plantreg_gui.core.data.recording import Recording
+from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, evaluate_landmarks
+from plantreg_gui.core.synthetic import demo_rig, make_plant_scene, render_depth
+from plantreg_gui.core.synthetic.landmarks import perturb_rig, synthetic_landmarks
+from plantreg_gui.core.synthetic.scene import MAT_GROUND, MAT_LEAF0
+from plantreg_gui.models.landmarks import LandmarkSession
+
+CAM = "thermal"
+
+
+def edge_landmark(rig, scene, depth, rng):
+    """A click on the ground one pixel past a leaf's edge (a third of its 7x7 core on the leaf).
+
+    Returns the landmark (its thermal pixel: the true edge point projected) and the true depth
+    (m, along the depth camera's axis) of the leaf's plane at the click."""
+    cam = rig.depth()
+    px = cam.pixel_grid()
+    o, d = cam.rays_rig(px)
+    _t, prim, _b = scene.cast(o, d)
+    H, W = depth.shape
+    prim = prim.reshape(H, W)
+    mat = np.where(prim >= 0, scene.material[np.maximum(prim, 0)], -1)
+    leaf = mat >= MAT_LEAF0
+    cands = []
+    for v in range(8, H - 8):
+        for u in range(8, W - 8):
+            if mat[v, u] != MAT_GROUND or not leaf[v, u + 1] or leaf[v, u - 1]:
+                continue  # the ground, the leaf right beside it, open ground on the other side
+            if leaf[v - 3:v + 4, u - 3:u + 4].mean() >= 0.3:
+                cands.append((u, v))
+    assert len(cands) > 20
+    u, v = cands[rng.integers(len(cands))]
+    # the leaf's plane (the triangle of the pixel beside the click) met by the click's ray
+    tri = scene.vertices[scene.triangles[prim[v, u + 1]]]
+    n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    oo, dd = cam.rays_rig(np.array([[u, v]], float))
+    oo, dd = np.asarray(oo, float).reshape(3), dd.reshape(3)
+    P = oo + dd * (n @ (tri[0] - oo)) / (n @ dd)
+    z_true = float(cam.to_cam(P[None])[0, 2])
+    uv_cam, _ = rig.camera(CAM).project(P[None])
+    return Landmark(np.array([u, v], float), {CAM: uv_cam[0]}, note="just past a leaf's edge"), z_true
+
+
+@pytest.fixture(scope="module", params=[3, 0], ids=["plant3", "plant0"])
+def world(request):
+    rig = demo_rig()
+    scene = make_plant_scene(request.param)
+    rec = Recording(None, render_depth(rig, scene), {c.name: np.zeros(c.shape, np.float32) for c in rig.cameras})
+    return rig, scene, rec
+
+
+def session_with_edge(world, seed=5):
+    """12 careful clicks (0.3 px noise) and the edge click last; the start rig's thermal camera off."""
+    rig, scene, rec = world
+    rng = np.random.default_rng(seed)
+    depth = rec.depth_m(rig.depth_scale)
+    truth = synthetic_landmarks(rig, scene, 12, 0.3, rng, sources=[CAM])
+    edge, z_true = edge_landmark(rig, scene, depth, rng)
+    start = perturb_rig(rig, rng, rotation_deg=2.0, position_m=0.02, focal_rel=0.0, cameras=[CAM])
+    s = LandmarkSession(start, LandmarkSet(), {"plant": rec})
+    s.set_camera(CAM)
+    for lm in truth + [edge]:
+        s.add_point(lm.depth_uv, lm.cameras, lm.note)
+    return s, truth, z_true
+
+
+def test_session_flags_the_edge_landmark_and_the_switch_means_what_no_snap_depth_means(world):
+    rig, scene, rec = world
+    s, truth, z_true = session_with_edge(world)
+    depth = rec.depth_m(rig.depth_scale)
+    edge = len(truth)
+    assert s.snap_depth  # as fit-rig without --no-snap-depth
+    checks = s.depth_checks()
+    # the careful clicks: on their surface, at the true point's depth
+    for i, lm in enumerate(truth):
+        P = np.array([float(x) for x in lm.note.split("[")[1].split("]")[0].split(",")])
+        assert checks[i].status == "ok" and checks[i].z_m == pytest.approx(rig.depth().to_cam(P[None])[0, 2], abs=0.005)
+    # the edge click read the ground and is put onto the leaf beside it, by the true amount
+    u, v = (int(a) for a in s.points[edge].depth_uv)
+    c = checks[edge]
+    assert c.status == "snapped" and "behind" in c.reason
+    assert c.read_m == pytest.approx(depth[v, u], abs=0.01) and depth[v, u] > rig.ground_z - 0.1
+    assert c.z_m == pytest.approx(z_true, abs=0.01)
+    assert c.snapped_mm == pytest.approx(1000 * (depth[v, u] - z_true), abs=10)
+    row = next(r for r in s.table() if r["index"] == edge)
+    assert row["depth"] is c and row["residual_px"] is not None
+    # the rig's prediction uses the depth the fit uses: the true rig puts the point where it was meant
+    s_true = LandmarkSession(rig, LandmarkSet(), {"plant": rec})
+    s_true.add_point(s.points[edge].depth_uv, s.points[edge].cameras)
+    s_true.set_camera(CAM)
+    assert np.linalg.norm(s_true.predicted(0) - s.points[edge].cameras[CAM]) < 1.0
+
+    # the page's fit: the snapped landmark in, fitted as the truth says
+    res = s.fit()
+    (sn,) = res.report["landmarks_snapped"]
+    assert sn["index"] == edge and sn["snapped_to_m"] == c.z_m  # one decision, the page's and the fit's
+    fitted = {d["index"]: d["residual_px"] for d in res.report["residuals"]}
+    assert fitted[edge] < 2.0, fitted
+    assert _unseen_px(rig, s.rig, scene, rec) < 1.0
+
+    # switched off: the same landmark is left out, in the table and in the fit
+    seen = []
+    s.events.options.connect(lambda: seen.append("options"))
+    s.events.points.connect(lambda: seen.append("points"))
+    s.set_snap_depth(False)
+    assert seen == ["options", "points"]
+    c2 = s.depth_checks()[edge]
+    assert c2.status == "left out" and math.isnan(c2.z_m) and "--no-snap-depth" in c2.reason
+    assert all(s.depth_checks()[i].status == "ok" for i in range(edge))
+    assert edge not in s.residuals() and s.predicted(edge) is None
+    res = s.fit()
+    assert [d["index"] for d in res.report["landmarks_rejected"]] == [edge]
+    assert res.report["landmarks_used"] == edge and not res.report["landmarks_snapped"]
+
+
+def _unseen_px(true_rig, fitted, scene, rec):
+    lms = synthetic_landmarks(true_rig, scene, 12, 0.0, np.random.default_rng(99), sources=[CAM])
+    rows, _ = evaluate_landmarks(fitted, [RecordingLandmarks("u", rec.depth_m(true_rig.depth_scale), lms)], [CAM])
+    return float(np.median([d["residual_px"] for d in rows]))
+
+
+def test_page_shows_the_depth_flag_and_its_switch_follows_the_session(qtbot, world):
+    from plantreg_gui.gui.landmarks.page import TABLE_COLUMNS, LandmarkPage
+
+    s, truth, z_true = session_with_edge(world, seed=6)
+    edge = len(truth)
+    page = LandmarkPage()
+    qtbot.addWidget(page)
+    page.resize(1500, 900)
+    page.show()
+    qtbot.waitExposed(page)
+    page.set_session(s)
+    try:
+        col = TABLE_COLUMNS.index("depth")
+
+        def cell(index):
+            t = page.table
+            r = next(r for r in range(t.rowCount()) if int(t.item(r, 0).text()) == index)
+            return t.item(r, col)
+
+        assert page.snap_depth.isChecked()
+        c = cell(edge)
+        mm = 1000 * (s.depth_check(edge).read_m - z_true)
+        got = float(c.text().split("snapped ")[1].split(" mm")[0])
+        assert got == pytest.approx(mm, abs=10) and "behind" in c.toolTip()
+        assert cell(0).text().endswith(" m") and not cell(0).toolTip()
+        edge_marker = next(m for m in page.left.markers if m.index == edge)
+        assert "snapped" in edge_marker.label
+
+        page.snap_depth.click()  # the view's switch sets the model
+        assert not s.snap_depth
+        assert cell(edge).text().startswith("left out") and "--no-snap-depth" in cell(edge).toolTip()
+        assert page.table.item(next(r for r in range(page.table.rowCount())
+                                    if int(page.table.item(r, 0).text()) == edge), 1).text() == "—"
+        with qtbot.waitSignal(page.fit_done, timeout=300_000):
+            page.fit_button.click()
+        assert [d["index"] for d in s.report["landmarks_rejected"]] == [edge]
+        assert "not used" in page.report_text.toPlainText()
+
+        s.set_snap_depth(True)  # the model's change shows in the view
+        assert page.snap_depth.isChecked() and "snapped" in cell(edge).text()
+    finally:
+        qtbot.waitUntil(lambda: not page.is_busy(), timeout=300_000)
+        page.shutdown()
