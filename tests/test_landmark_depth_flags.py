@@ -164,6 +164,10 @@ def test_page_shows_the_depth_flag_and_its_switch_follows_the_session(qtbot, wor
         assert cell(0).text().endswith(" m") and not cell(0).toolTip()
         edge_marker = next(m for m in page.left.markers if m.index == edge)
         assert "snapped" in edge_marker.label
+        s.select(edge)  # selected (on the image or in the table): the hint says why, the table shows its row
+        assert "behind" in page.hint.text() and f"snapped to {s.depth_check(edge).z_m:.3f} m" in page.hint.text()
+        assert int(page.table.selectedItems()[0].text()) == edge
+        s.select(None)
 
         page.snap_depth.click()  # the view's switch sets the model
         assert not s.snap_depth

@@ -380,8 +380,8 @@ class LandmarkSession:
     # ------------------------------------------------------------------ residuals
     def _recording_landmarks(self, keys: list[str] | None = None) -> list[RecordingLandmarks]:
         keys = keys if keys is not None else [k for k, v in self.landmarks.recordings.items() if v]
-        return [RecordingLandmarks(k, self.depth_m(k), self.landmarks.recordings[k], snap_depth=self.snap_depth)
-                for k in keys]
+        return [RecordingLandmarks(k, self.depth_m(k), self.landmarks.recordings[k], snap_depth=self.snap_depth,
+                                   depth_checks=self.depth_checks(k)) for k in keys]
 
     def residuals(self, camera: str | None = None) -> dict[int, float]:
         """Residual (px, predicted minus clicked) of the current rig for each point of the current
@@ -427,8 +427,8 @@ class LandmarkSession:
     def fit_job(self, free: frozenset[str] | None = None) -> Callable[..., FitResult]:
         """A routine ``(progress=Reporter) -> FitResult`` on copies of the current state."""
         rig = Rig.from_dict(self.rig.to_dict())
-        recs = [RecordingLandmarks(r.name, r.depth_m, [copy.deepcopy(lm) for lm in r.points], r.snap_depth)
-                for r in self._recording_landmarks()]
+        recs = [RecordingLandmarks(r.name, r.depth_m, [copy.deepcopy(lm) for lm in r.points], r.snap_depth,
+                                   r.depth_checks) for r in self._recording_landmarks()]
         free = self.free if free is None else free
 
         def job(progress: Reporter | None = None) -> FitResult:

@@ -119,6 +119,9 @@ class RecordingLandmarks:
     #: put a landmark whose depth lies behind the surface beside it onto that surface
     #: (:func:`depth_jump`; a click just past a leaf's edge reads the ground) -- else leave it out
     snap_depth: bool = True
+    #: the caller's :func:`check_landmark_depth` of ``points`` by index (same ``snap_depth``), to
+    #: spare reading them again (the landmark page repaints on every drag step); None = read here
+    depth_checks: dict[int, "DepthCheck"] | None = None
 
 
 @dataclass
@@ -505,7 +508,8 @@ def _collect(rig: Rig, recordings: Sequence[RecordingLandmarks], cameras: set[st
             cams = {c: uv for c, uv in lm.cameras.items() if c != dname and (cameras is None or c in cameras)}
             if not cams:
                 continue
-            chk = check_landmark_depth(rec.depth_m, lm.depth_uv, rig.ground_z, rec.snap_depth)
+            chk = (rec.depth_checks or {}).get(li) or check_landmark_depth(rec.depth_m, lm.depth_uv, rig.ground_z,
+                                                                            rec.snap_depth)
             if chk.status == "snapped":
                 rejected.append({"recording": rec.name, "index": li, "note": lm.note,
                                  "depth_uv": [float(v) for v in lm.depth_uv], "reason": chk.reason,

@@ -16,6 +16,7 @@ Qt-free :class:`~plantreg_gui.models.landmarks.LandmarkSession`.
 
 from __future__ import annotations
 
+import html
 from pathlib import Path
 
 import numpy as np
@@ -549,12 +550,28 @@ class LandmarkPage(QWidget):
         if s.pending is not None:
             self.hint.setText(f"Now click the same point in <b>{s.camera}</b> (Esc cancels).")
         elif s.selected is not None:
+            chk = s.depth_check(s.selected)
+            depth = "" if chk.status == "ok" else (
+                f" Its depth: {html.escape(chk.reason, quote=False)}"
+                + (f"; snapped to {chk.z_m:.3f} m." if chk.status == "snapped" else "."))
             self.hint.setText(f"Point {s.selected} selected: drag it to move, Del to delete. "
-                              f"{n} points in this recording.")
+                              f"{n} points in this recording.{depth}")
+            self._show_selected_row()
         else:
             self.hint.setText(f"{n} points in this recording, {s.landmarks.count()} in all. Click a point in "
                               f"the depth camera, then in {s.camera}. Wheel zooms, drag pans, double-click fits.")
         self._sync_enabled()
+
+    def _show_selected_row(self) -> None:
+        t, sel = self.table, self.session.selected
+        for r in range(t.rowCount()):
+            if t.item(r, 0) is not None and int(t.item(r, 0).data(Qt.ItemDataRole.UserRole)) == sel:
+                if r not in {i.row() for i in t.selectedItems()}:
+                    t.blockSignals(True)
+                    t.selectRow(r)
+                    t.blockSignals(False)
+                t.scrollToItem(t.item(r, 0))
+                return
 
     def _rig_changed(self) -> None:
         self._overlay_timer.start()
