@@ -552,7 +552,7 @@ class LandmarkPage(QWidget):
         elif s.selected is not None:
             chk = s.depth_check(s.selected)
             depth = "" if chk.status == "ok" else (
-                f" Its depth: {html.escape(chk.reason, quote=False)}"
+                f" Depth check: {html.escape(chk.reason, quote=False)}"
                 + (f"; snapped to {chk.z_m:.3f} m." if chk.status == "snapped" else "."))
             self.hint.setText(f"Point {s.selected} selected: drag it to move, Del to delete. "
                               f"{n} points in this recording.{depth}")
