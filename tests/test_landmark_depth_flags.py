@@ -17,7 +17,7 @@ import pytest
 from plantreg_gui.core.camera.rig import Rig
 from plantreg_gui.core.data.landmarks import Landmark, LandmarkSet
 from plantreg_gui.core.data.recording import Recording
-from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, evaluate_landmarks
+from plantreg_gui.core.rigfit.rigfit import RecordingLandmarks, check_landmark_depth, evaluate_landmarks
 from plantreg_gui.core.synthetic import demo_rig, make_plant_scene, render_depth
 from plantreg_gui.core.synthetic.landmarks import perturb_rig, synthetic_landmarks
 from plantreg_gui.core.synthetic.scene import MAT_GROUND, MAT_LEAF0
@@ -101,7 +101,11 @@ def test_session_flags_the_edge_landmark_and_the_switch_means_what_no_snap_depth
     assert c.z_m == pytest.approx(z_true, abs=0.01)
     assert c.snapped_mm == pytest.approx(1000 * (depth[v, u] - z_true), abs=10)
     row = next(r for r in s.table() if r["index"] == edge)
-    assert row["depth"] is c and row["residual_px"] is not None
+    assert row["depth"] == c and row["residual_px"] is not None
+    uv = s.points[edge].depth_uv  # the CLI's switch and the page's: one decision either way round
+    assert check_landmark_depth(depth, uv, rig.ground_z, snap=False).snapping(True) == c
+    assert check_landmark_depth(depth, uv, rig.ground_z, snap=True).snapping(False) == \
+        check_landmark_depth(depth, uv, rig.ground_z, snap=False)
     # the rig's prediction uses the depth the fit uses: the true rig puts the point where it was meant
     s_true = LandmarkSession(rig, LandmarkSet(), {"plant": rec})
     s_true.add_point(s.points[edge].depth_uv, s.points[edge].cameras)

@@ -94,7 +94,8 @@ class LandmarkSession:
         #: a landmark whose depth lies behind the surface beside it is put onto that surface
         #: (True, as fit-rig) or left out of the fit (False, as fit-rig --no-snap-depth)
         self.snap_depth = True
-        #: (recording, u, v, ground_z, snap) -> DepthCheck: a repaint reads a landmark's depth once
+        #: (recording, u, v, ground_z) -> DepthCheck (snapping on): a repaint, a fit or switching
+        #: snapping reads a landmark's depth once
         self._depth_checks: dict[tuple, DepthCheck] = {}
         self._undo: list[tuple[dict, dict]] = []
         self._redo: list[tuple[dict, dict]] = []
@@ -364,13 +365,12 @@ class LandmarkSession:
         key = key or self.recording_key
         lm = self.landmarks.recordings[key][index]
         u, v = (float(a) for a in lm.depth_uv)
-        ck = (key, u, v, self.rig.ground_z, self.snap_depth)
+        ck = (key, u, v, self.rig.ground_z)
         if ck not in self._depth_checks:
             if len(self._depth_checks) > 4096:
                 self._depth_checks.clear()
-            self._depth_checks[ck] = check_landmark_depth(self.depth_m(key), lm.depth_uv, self.rig.ground_z,
-                                                          self.snap_depth)
-        return self._depth_checks[ck]
+            self._depth_checks[ck] = check_landmark_depth(self.depth_m(key), lm.depth_uv, self.rig.ground_z)
+        return self._depth_checks[ck].snapping(self.snap_depth)
 
     def depth_checks(self, key: str | None = None) -> dict[int, DepthCheck]:
         """:meth:`depth_check` of every point of recording ``key`` (default the current one)."""

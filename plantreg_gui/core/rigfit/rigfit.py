@@ -300,10 +300,20 @@ class DepthCheck:
     z_m: float
     read_m: float
     reason: str = ""
+    #: the nearer surface's depth at the click where the depth jumps (nan otherwise)
+    snap_m: float = math.nan
 
     @property
     def used(self) -> bool:
         return math.isfinite(self.z_m)
+
+    def snapping(self, snap: bool) -> "DepthCheck":
+        """This check with snapping on or off (a jump is snapped or left out; others unchanged)."""
+        if self.status not in ("snapped", "left out") or (self.status == "snapped") == snap:
+            return self
+        if snap:
+            return DepthCheck("snapped", self.snap_m, self.read_m, self.reason.removesuffix(_LEFT_OUT), self.snap_m)
+        return DepthCheck("left out", math.nan, self.read_m, self.reason + _LEFT_OUT, self.snap_m)
 
     @property
     def snapped_mm(self) -> float:
@@ -323,9 +333,10 @@ def check_landmark_depth(depth_m: np.ndarray, uv: np.ndarray, ground_z: float | 
     jump, z_snap = depth_jump(depth_m, uv, z, ground_z)
     if not jump:
         return DepthCheck("ok", z, z)
-    if snap:
-        return DepthCheck("snapped", z_snap, z, jump)
-    return DepthCheck("left out", math.nan, z, jump + "; left out (--no-snap-depth)")
+    return DepthCheck("snapped", z_snap, z, jump, z_snap).snapping(snap)
+
+
+_LEFT_OUT = "; left out (--no-snap-depth)"
 
 
 def _nearest(mask: np.ndarray, i: int, j: int) -> float:
