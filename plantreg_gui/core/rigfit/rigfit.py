@@ -254,8 +254,9 @@ def depth_jump(depth_m: np.ndarray, uv: np.ndarray, z: float, ground_z: float | 
     right beside it (the ground or a leaf behind, seen through a notch or just past a leaf's
     edge): two thirds of the pixels with depth in the (2r+1)^2 window lie more than 5 cm + 5 %
     nearer, or, for a depth within 5 cm of the ground plane ``ground_z``, a quarter of those in
-    the 7x7 core. Returns ``("", nan)`` or ``(reason, z_snapped)``: the nearer surface's
-    depth at the click (a plane in inverse depth through its pixels, weighted towards the click)."""
+    the 7x7 core or one within :data:`EDGE_REACH_PX` of the click. Returns ``("", nan)`` or
+    ``(reason, z_snapped)``: the depth at the click of the nearer surface nearest to it (a plane
+    in inverse depth through its pixels, weighted towards the click)."""
     H, W = depth_m.shape
     u0, v0 = int(round(float(uv[0]))), int(round(float(uv[1])))
     a0, a1, b0, b1 = max(0, v0 - radius), min(H, v0 + radius + 1), max(0, u0 - radius), min(W, u0 + radius + 1)
@@ -267,23 +268,38 @@ def depth_jump(depth_m: np.ndarray, uv: np.ndarray, z: float, ground_z: float | 
     cv, cu = v0 - a0, u0 - b0
     core_ok, core_near = (m[max(0, cv - 3):cv + 4, max(0, cu - 3):cu + 4] for m in (ok, near))
     at_ground = ground_z is not None and z > ground_z - 0.05
+    d_near = _nearest(near, cv, cu)
     # surrounded by a nearer surface (a notch, a hole); or at the ground's depth right beside one
-    # (a click just past a leaf's edge; a lower leaf beside an upper one's edge is a fair landmark)
-    if near.sum() < 0.65 * ok.sum() and not (at_ground and core_ok.sum() and core_near.sum() >= 0.25 * core_ok.sum()):
+    # (a click on a leaf's corner or tip that the ToF's valid depth stops short of; a lower leaf
+    # beside an upper one's edge is a fair landmark)
+    beside = at_ground and (core_ok.sum() and core_near.sum() >= 0.25 * core_ok.sum() or d_near <= EDGE_REACH_PX)
+    if near.sum() < 0.65 * ok.sum() and not beside:
         return "", math.nan
-    vv, uu = np.nonzero(near)
-    zn = win[near]
-    lead = np.median(zn)
-    keep = np.abs(zn - lead) < 0.03 + 0.03 * lead  # the main nearer surface, not a mix of several
-    du, dv = uu[keep] + b0 - uv[0], vv[keep] + a0 - uv[1]
-    zs = inverse_depth_plane(zn[keep], du, dv, np.exp(-(du ** 2 + dv ** 2) / (2.0 * (0.5 * radius) ** 2)))
-    if not (np.isfinite(zs) and zn[keep].min() - 0.02 <= zs <= zn[keep].max() + 0.02):
-        zs = float(lead)
+    # the nearer surface nearest the click (one leaf's corner, not a mix of the leaves around it)
+    vn, un = np.nonzero(near)
+    j = int(np.argmin(np.hypot(vn - cv, un - cu)))
+    sel = grow_surface(win, near, (int(vn[j]), int(un[j])))
+    if sel.sum() < 5:  # a sliver: the main nearer surface instead
+        sel = near & (np.abs(win - np.median(win[near])) < 0.03 + 0.03 * np.median(win[near]))
+    vv, uu = np.nonzero(sel)
+    zn = win[sel]
+    lead = float(np.median(zn))
+    du, dv = uu + b0 - uv[0], vv + a0 - uv[1]
+    zs = inverse_depth_plane(zn, du, dv, np.exp(-(du ** 2 + dv ** 2) / (2.0 * (0.5 * radius) ** 2)))
+    if not (np.isfinite(zs) and zn.min() - 0.02 <= zs <= zn.max() + 0.02):
+        zs = lead
     where = " (the ground's depth)" if at_ground else ""
-    return (f"depth {z:.3f} m{where} lies {100 * (z - lead):.0f} cm behind the surface filling "
-            f"{100 * near.sum() / ok.sum():.0f} % of its {2 * radius + 1}x{2 * radius + 1} neighbourhood "
-            f"({lead:.3f} m) and reaching to within {_nearest(near, cv, cu):.0f} px of it: a click past a leaf's "
-            "edge or through a notch"), float(zs)
+    return (f"depth {z:.3f} m{where} lies {100 * (z - lead):.0f} cm behind the surface "
+            f"({lead:.3f} m) reaching to within {d_near:.0f} px of it and filling "
+            f"{100 * near.sum() / ok.sum():.0f} % of its {2 * radius + 1}x{2 * radius + 1} neighbourhood: a click "
+            "past a leaf's edge or through a notch"), float(zs)
+
+
+#: how far (px) beside a click that reads the ground a leaf's valid depth may end and the click
+#: still count as on that leaf: the Azure Kinect's valid depth ends 2-4 px (thin tips up to 6.5 px)
+#: short of the leaf's edge in its infrared image (resources/plant3dimagereg/README.md, "Raw clicks"
+#: and "How the landmarks were made", step 3)
+EDGE_REACH_PX = 7.0
 
 
 @dataclass(frozen=True)
