@@ -255,3 +255,16 @@ def test_real_clicks_as_read_that_hit_the_ground_are_snapped_to_the_hand_validat
                 z_hand, _ = landmark_depth(depth[plant], np.array(it["ir"], float))
                 assert c.z_m == pytest.approx(z_hand, abs=0.02), (key, it["note"])
     assert n_ground >= 12  # measured: 16 of the 23 with depth read the ground
+
+
+@pytest.mark.parametrize("seed", [0, 31, 44, 60, 70, 71])
+def test_no_landmark_on_the_plant_is_flagged(seed):
+    """The other side: 40 landmarks on a demo plant (pot, soil, stems, leaves; many near a leaf's
+    edge or above a lower leaf) keep the depth of their true point."""
+    rig = demo_rig()
+    scene = make_plant_scene(seed)
+    depth = Recording(None, render_depth(rig, scene), {}).depth_m(rig.depth_scale)
+    for lm in synthetic_landmarks(rig, scene, 40, 0.0, np.random.default_rng(seed)):
+        P = np.array([float(x) for x in lm.note.split("[")[1].split("]")[0].split(",")])
+        c = check_landmark_depth(depth, lm.depth_uv, rig.ground_z)
+        assert c.status == "ok" and c.z_m == pytest.approx(rig.depth().to_cam(P[None])[0, 2], abs=0.01), lm.note
