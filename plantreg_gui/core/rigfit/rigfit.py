@@ -281,18 +281,28 @@ def depth_jump(depth_m: np.ndarray, uv: np.ndarray, z: float, ground_z: float | 
     sel = grow_surface(win, near, (int(vn[j]), int(un[j])))
     if sel.sum() < 5:  # a sliver: the main nearer surface instead
         sel = near & (np.abs(win - np.median(win[near])) < 0.03 + 0.03 * np.median(win[near]))
-    vv, uu = np.nonzero(sel)
-    zn = win[sel]
-    lead = float(np.median(zn))
-    du, dv = uu + b0 - uv[0], vv + a0 - uv[1]
-    zs = inverse_depth_plane(zn, du, dv, np.exp(-(du ** 2 + dv ** 2) / (2.0 * (0.5 * radius) ** 2)))
-    if not (np.isfinite(zs) and zn.min() - 0.02 <= zs <= zn.max() + 0.02):
-        zs = lead
+    lead, zs = _plane_at_click(win, sel, uv, a0, b0, 0.5 * radius)
     where = " (the ground's depth)" if at_ground else ""
     return (f"depth {z:.3f} m{where} lies {100 * (z - lead):.0f} cm behind the surface "
             f"({lead:.3f} m) reaching to within {d_near:.0f} px of it and filling "
             f"{100 * near.sum() / ok.sum():.0f} % of its {2 * radius + 1}x{2 * radius + 1} neighbourhood: a click "
             "past a leaf's edge or through a notch"), float(zs)
+
+
+def _plane_at_click(win: np.ndarray, sel: np.ndarray, uv: np.ndarray, a0: int, b0: int, sigma_px: float
+                    ) -> tuple[float, float]:
+    """(median depth, depth at the click ``uv``) of the surface ``sel`` (h, w) bool of the depth
+    window ``win`` (h, w) whose top-left pixel is (row ``a0``, column ``b0``): a plane in inverse
+    depth through its pixels weighted towards the click (Gaussian, ``sigma_px``), kept within 2 cm
+    of the surface's depths (else the median)."""
+    vv, uu = np.nonzero(sel)
+    zn = win[sel]
+    lead = float(np.median(zn))
+    du, dv = uu + b0 - uv[0], vv + a0 - uv[1]
+    zs = inverse_depth_plane(zn, du, dv, np.exp(-(du ** 2 + dv ** 2) / (2.0 * sigma_px ** 2)))
+    if not (np.isfinite(zs) and zn.min() - 0.02 <= zs <= zn.max() + 0.02):
+        zs = lead
+    return lead, float(zs)
 
 
 #: how far (px) beside a click that reads the ground a leaf's valid depth may end and the click
@@ -345,6 +355,8 @@ def check_landmark_depth(depth_m: np.ndarray, uv: np.ndarray, ground_z: float | 
     (``snap``) or left out. The one place the fit, the CLI report and the landmark page decide it."""
     z, reason = landmark_depth(depth_m, uv)
     if not np.isfinite(z):
+        # not put on the front surface beside it: measured on the real pairs as read, the 3 such
+        # clicks made the held-out plants worse (docs/fit-rig.md, "From raw files to a rig")
         return DepthCheck("no depth", math.nan, math.nan, reason)
     jump, z_snap = depth_jump(depth_m, uv, z, ground_z)
     if not jump:
