@@ -202,8 +202,7 @@ class LandmarkPage(QWidget):
         top.addStretch(1)
         second = QHBoxLayout()
         for w in (QLabel("Fit frees"), self.free_combo, self.depth_free, self.snap_depth, self.fit_button,
-                  self.refine_button,
-                  self.cancel_button, self.progress):
+                  self.refine_button, self.cancel_button, self.progress):
             second.addWidget(w)
         second.addStretch(1)
 
