@@ -64,6 +64,14 @@ def main() -> None:
         time.sleep(0.05)
     page.grab().save(args.out)
     print("wrote", args.out)
+    gaps = []
+    for _ in range(4):  # the switch and back: the page repaints its table, markers and hint
+        t = time.perf_counter()
+        page.snap_depth.click()
+        app.processEvents()
+        gaps.append(time.perf_counter() - t)
+    print(f"snap switch, click to repainted: {', '.join(f'{1000 * g:.0f}' for g in gaps)} ms; "
+          f"load average {os.getloadavg()[0]:.1f}")
     for r in s.table():
         d = r["depth"]
         res = "-" if r["residual_px"] is None else f"{r['residual_px']:.2f} px"
