@@ -163,3 +163,21 @@ def test_known_intrinsics_fixed_and_as_priors():
     cal = calibrate(s, dets, known={"cam1": prior})
     assert abs(cal.rig.camera("cam1").K[0, 0] - true1.K[0, 0]) < 0.3 * abs(K[0, 0] - true1.K[0, 0])
     assert 0 < cal.uncertainty["cam1"].std["fx"] < 50.0
+
+
+def test_views_are_asked_for_exactly_where_a_limit_is_exceeded():
+    """"Add views here" (the report's add_views_here, the heat map's outline) only for a camera
+    whose projection uncertainty exceeds a limit; a camera within the limits names only its least
+    certain regions. Sessions with boards all over the image and with few boards in the centre."""
+    seen = set()
+    for seed, coverage, n in ((220, "spread", 15), (221, "centre", 5), (222, "centre", 4)):
+        _rig, s, dets, _ = _session(seed, coverage, n_poses=n)
+        cal = calibrate(s, dets)
+        problems = cal.uncertainty_problems()
+        for cam, u in cal.uncertainty.items():
+            exceeded = any(p.startswith(f"camera '{cam}': projection uncertainty") for p in problems)
+            d = u.to_dict()
+            assert u.needs_views == exceeded, (seed, cam, problems)
+            assert bool(d["add_views_here"]) == exceeded and d["least_certain_regions"]
+            seen.add(exceeded)
+    assert seen == {True, False}
