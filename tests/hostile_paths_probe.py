@@ -5,6 +5,15 @@ byte-unchanged, no leftovers), ok (a valid input, exit 0), MISHANDLED, VAGUE.
 
     python tests/hostile_paths_probe.py SOURCE_TREE [NAME_FILTER ...]   (HP_ROOT=/tmp/hp by default)
 
+Classes: outputs over inputs and special files, camera names, symlink loops, NUL bytes (round 3,
+108 inputs); and, generated (round 3 widened): whole-file corruptions and hostile values (NaN,
+Infinity, 1e308, negative, zero, wrong types, missing keys, duplicate keys, huge arrays, deep
+nesting, BOM/UTF-16, whole numbers of 400 and 5000 digits) in every JSON file a command reads,
+hostile images (truncated, empty, forged sizes, wrong content for the suffix, wrong dtype or
+channels, NaN/inf depth), hostile numbers for every command's options, permissions (run through
+``setpriv`` without root's override of permission bits), long paths, names with newlines or bytes
+that are not UTF-8. The last line counts the verdicts (clean, ok, VAGUE, MISHANDLED).
+
 Outputs are only ever written under /tmp/hp/runs: device outputs are private nodes made there,
 never /dev/null (an old version replaced the system's /dev/null with a file when run as root).
 """
