@@ -42,6 +42,23 @@ def show_path(path: str | Path) -> str:
     return re.sub(r"[\x00-\x1f\x7f]", lambda m: repr(m.group())[1:-1], str(path))
 
 
+def said_once(path: str | Path | None, detail: str, within: str | Path) -> str:
+    """An error about ``path`` in a line that names the folder ``within`` already (a failed batch
+    row names its recording): a file inside it is named relative to it (``thermal.tif: ...``),
+    the folder itself not again (it was "failed X: X: ..."), any other path in full."""
+    import os
+
+    if not path:
+        return detail
+    a, base = os.path.abspath(str(path)), os.path.abspath(str(within))
+    if a == base:
+        return detail
+    if a.startswith(base.rstrip(os.sep) + os.sep):
+        rel = os.path.relpath(a, base)
+        return detail if detail.startswith(f"{rel} ") else f"{show_path(rel)}: {detail}"
+    return f"{show_path(path)}: {detail}"
+
+
 def one_line(text: str) -> str:
     """A library's message as one line: OpenCV's ``OpenCV(4.x) /path/file.cpp:123: error: (-215:...)
     ... in function 'f'`` loses its source location, and line breaks become ``; ``."""

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
-from ..errors import InputError, show_path
+from ..errors import InputError, said_once
 from .batch_guard import BATCH_CSV, write_csv  # noqa: F401 - part of this module's interface
 
 #: Attempts of a job whose worker process died (the first run and one retry).
@@ -209,20 +209,6 @@ def _rig_for(settings: BatchSettings):
     return _WorkerCache.rig
 
 
-def _said_once(path: Any, detail: str, recording: str) -> str:
-    """A failed row's error: the row names the recording already, so a file of it is named
-    relative to it (``thermal.tif: ...``) and the recording itself not again ("failed X: X: ...")."""
-    if not path:
-        return detail
-    a, rec = os.path.abspath(str(path)), os.path.abspath(str(recording))
-    if a == rec:
-        return detail
-    if a.startswith(rec.rstrip(os.sep) + os.sep):
-        rel = os.path.relpath(a, rec)
-        return detail if detail.startswith(f"{rel} ") else f"{show_path(rel)}: {detail}"
-    return f"{show_path(path)}: {detail}"
-
-
 def run_job(settings: BatchSettings, job: Job) -> dict[str, Any]:
     """Register one recording into ``OUT/<job.name>``; returns its ``batch.csv`` row. Never raises
     for a bad recording (the row says ``failed`` and why)."""
@@ -236,11 +222,11 @@ def run_job(settings: BatchSettings, job: Job) -> dict[str, Any]:
         from ..errors import PlantregError
 
         if isinstance(e, PlantregError):
-            row["error"] = _said_once(getattr(e, "path", None), getattr(e, "detail", None) or str(e), job.recording)
+            row["error"] = said_once(getattr(e, "path", None), getattr(e, "detail", None) or str(e), job.recording)
         elif isinstance(e, MemoryError):
             row["error"] = "out of memory"
         elif isinstance(e, OSError):
-            row["error"] = _said_once(e.filename, str(e.strerror or e), job.recording)
+            row["error"] = said_once(e.filename, str(e.strerror or e), job.recording)
         else:  # a defect, not a user error: keep the type so it can be reported
             row["error"] = f"internal error ({type(e).__name__}: {e})"
     row["seconds_total"] = round(time.perf_counter() - t0, 3)
