@@ -177,6 +177,7 @@ class ReviewPage(WizardPage):
         self.model.session_changed.connect(self._session)
         self.model.detection_changed.connect(self._detection)
         self.model.review_changed.connect(self._review)
+        self.model.board_hint_changed.connect(self._show_controls)
         self.model.calibration_changed.connect(self._relabel)
         self.model.view_selected.connect(lambda key: self.select(key[1], key[0]))
         self.model.poses_changed.connect(self._fill_list)
@@ -359,8 +360,13 @@ class ReviewPage(WizardPage):
         self.enhance.setChecked(bool(getattr(opts, "enhance", False)))
         self.redetect_btn.setEnabled(not self.actions.is_busy() and key[1] in self.model.session.pose(key[0]).images)
         if d is not None and d.status == "failed":
-            set_banner(self.info, f"Detection failed: {d.reason}. For a thermal image try the inverted polarity "
-                                  "and contrast enhancement, then Re-detect.")
+            if self.model.board_hint is not None:  # every image fails alike: the size, not the image
+                advice = f"{self.model.board_hint_text()} Set it on page 1 (or with the button on page 2)."
+            elif self.model.session.cameras.get(key[1]) == "thermal":
+                advice = "For a thermal image try the inverted polarity and contrast enhancement, then Re-detect."
+            else:
+                advice = "Try contrast enhancement for a faint or unevenly lit board, then Re-detect."
+            set_banner(self.info, f"Detection failed: {d.reason}. {advice}")
         elif key in self.model.excluded:
             set_banner(self.info, "Rejected: this view is not used in the calibration.")
         else:
