@@ -23,11 +23,13 @@ class WizardModel:
     None for "many changed"), ``review_changed()``, ``calibration_changed()``,
     ``report_changed()``, ``saved_changed()``, ``poses_changed()`` (pose folders added to or
     removed from the session), ``view_selected(key)`` (show this image in the corner review),
-    ``board_hint_changed()`` (see :meth:`set_board_hint`).
+    ``board_hint_changed()`` (see :meth:`set_board_hint`), ``review_display_changed()`` (the
+    corner review's display choices: :attr:`review_undistorted`).
     ``parent`` is accepted for the wizard's call and not used (the model owns no Qt object)."""
 
     EVENTS = ("session_changed", "detection_changed", "review_changed", "calibration_changed", "report_changed",
-              "saved_changed", "poses_changed", "view_selected", "board_hint_changed")
+              "saved_changed", "poses_changed", "view_selected", "board_hint_changed",
+              "review_display_changed")
 
     def __init__(self, parent: Any = None) -> None:
         for name in self.EVENTS:
@@ -41,6 +43,7 @@ class WizardModel:
         self.report_stale = False
         self.saved_paths: dict[str, str] = {}
         self.board_hint: tuple[int, int] | None = None  # (columns, rows) found where the session's board was not
+        self.review_undistorted = False  # the corner review shows images undistorted with the calibrated model
 
     # ------------------------------------------------------------------ session
     def set_session(self, session) -> None:
@@ -190,6 +193,12 @@ class WizardModel:
         self.poses_changed.emit()
         self.detection_changed.emit(None)
         return problems
+
+    def set_review_undistorted(self, on: bool) -> None:
+        """Show the corner review's images undistorted with the calibrated model (or as taken)."""
+        if bool(on) != self.review_undistorted:
+            self.review_undistorted = bool(on)
+            self.review_display_changed.emit()
 
     def set_board_hint(self, hint: tuple[int, int] | None) -> None:
         """A chessboard size (columns, rows) found in the images of a camera that found none of

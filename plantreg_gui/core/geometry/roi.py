@@ -112,9 +112,11 @@ def ground_share(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[fl
 def ground_warning(points: np.ndarray, lo: np.ndarray, hi: np.ndarray, advice: bool = True) -> str | None:
     """A sentence when the ROI's ground plane lies in (or just behind) a measured surface: more
     than GROUND_WARN_FRACTION of the measured depth inside the ROI within GROUND_BAND_M in front
-    of it (see :func:`ground_share`); else None. ``advice``: end with what to do about it."""
+    of it (see :func:`ground_share`); else None, and None when the ROI cuts the plant (then the
+    surface at its ground plane is the plant's: :func:`cut_warning` says so). ``advice``: end with
+    what to do about it."""
     frac, n, _near = ground_share(points, lo, hi)
-    if n < 100 or frac <= GROUND_WARN_FRACTION:
+    if n < 100 or frac <= GROUND_WARN_FRACTION or cut_warning(points, lo, hi) is not None:
         return None
     hi = np.asarray(hi, float)
     text = (f"the ROI's ground plane (max z = {hi[2]:.2f} m) lies in a measured surface: {100 * frac:.0f} % of the "

@@ -195,6 +195,8 @@ class CalibrationWizard(QWidget):
             self._worker = None
         self._set_busy(False)
         for p in self.pages:
+            if hasattr(p, "shutdown"):
+                p.shutdown()
             v = getattr(p, "view3d", None)
             if v is not None:
                 v.close_plotter()
