@@ -642,3 +642,87 @@ def test_corner_review_draws_residual_vectors_and_shows_undistorted(qtbot, share
     finally:
         w.shutdown()
         w.close()
+
+
+def test_depth_page_per_view_columns_follow_the_camera_order(qtbot, demo_dir):
+    """Defect 10: page 6's per-view columns were alphabetical, unlike the N x N table beside them
+    (the rig's camera order)."""
+    from PySide6.QtCore import QObject, Signal
+
+    from plantreg_gui.core.calibration import Session
+    from plantreg_gui.gui.calibration.depth_page import DepthPage
+    from plantreg_gui.models.calibration import WizardModel
+
+    class Actions(QObject):
+        busy_changed = Signal(bool)
+
+        def is_busy(self) -> bool:
+            return False
+
+    m = WizardModel()
+    m.set_session(Session.load(demo_dir / "calibration"))
+    names = m.session.camera_names
+    assert names != sorted(names)  # ir, rgb, thermal, hyperspectral: not alphabetical
+    cell = {"px": 0.2, "normalized": 0.3}
+    depth = {"ir": {t: {"pose_01": cell, "pose_02": cell} for t in sorted(names) if t != "ir"}}
+    m.set_report({"depth": {"ir": {t: cell for t in names if t != "ir"}}, "views": {"depth": depth}})
+    page = DepthPage(m, Actions())
+    qtbot.addWidget(page)
+    page.refresh()
+    header = [page.views.horizontalHeaderItem(j).text() for j in range(page.views.columnCount())]
+    assert header == ["pose"] + [f"ir → {t}" for t in names if t != "ir"]
+
+
+def test_legend_swatches_show_the_colours_of_the_map(registered_workspace, qapp):
+    """Defect 10: the P5 overlay read brown against its orange legend swatch (a tint at partial
+    opacity over a dimmed picture). Each swatch now shows its code as the map does: the map's
+    median colour over that code's pixels."""
+    import numpy as np
+
+    from PySide6.QtCore import Qt
+
+    from plantreg_gui.core.registration.cases import Area, Case
+
+    ws = registered_workspace
+    ws.set_view("masks")
+    mv = ws.masks_view
+    mv.show_areas.setChecked(True)
+    from plantreg_gui.core.display import display
+
+    src = mv.source.currentText()
+    qapp.processEvents()
+    img = mv.composite()
+    cases = mv.cases[src]
+    code = max(display.CASE_COLOURS, key=lambda c: int((cases == c).sum()))  # the case map's biggest overlay
+    for legend, codes, code in ((mv.case_legend, cases, code), (mv.area_legend, mv.area, int(Area.P5))):
+        sel = codes == code
+        assert sel.sum() >= 5, (code, int(sel.sum()))
+        want = np.median(img[sel], axis=0)
+        row = legend.codes.index(code)
+        c = legend.item(row, 0).data(Qt.ItemDataRole.DecorationRole)
+        got = np.array([c.red(), c.green(), c.blue()])
+        assert np.abs(got - want).max() <= 12, (code, got, want)
+    # (the old pure swatches: P5 (255, 140, 0) against (219, 122, 4) on this map, beyond the tolerance)
+
+
+def test_3d_read_out_states_every_length_in_mm_and_the_pick_distance(registered_workspace):
+    """The 3D picking read-out: position, distance between two picks and the range from the rig
+    origin all in millimetres (points are stored in metres); the cube's value with its unit; the
+    point-size control says it is screen pixels."""
+    import numpy as np
+
+    ws = registered_workspace
+    cv = ws.cloud_view
+    cloud = ws.session.cloud
+    P = cloud.points.astype(np.float64)
+    a, b = 10, len(P) // 2
+    cv.pick(P[a])
+    cv.pick(P[b])
+    text = cv.info.text()
+    d_mm = np.linalg.norm(P[a] - P[b]) * 1000  # truth: the stored points, metres
+    assert f"distance to point {a} (previous pick): {d_mm:.1f} mm" in text
+    assert f"{np.linalg.norm(P[b]) * 1000:.1f} mm from the rig origin" in text
+    assert " m " not in text and not text.rstrip().endswith(" m")
+    cube = next(ln for ln in text.splitlines() if ln.startswith("hyperspectral:"))
+    assert cube.endswith("reflectance")
+    assert cv.point_size.suffix() == " px"
