@@ -260,6 +260,8 @@ class SavePage(WizardPage):
             self.pose.addItem(f"plant: {path.parent.name}/{path.name}", ("plant", key))
             i = self.pose.count() - 1
         self.pose.setCurrentIndex(i)
+        if self.message.text().startswith("Not saved: load a plant depth map"):
+            set_banner(self.message, "")  # done
         if self.fit_roi():
             set_banner(self.roi_msg, f"ROI fitted to the plant depth map {path.name}: check it below, then save.")
         return True
