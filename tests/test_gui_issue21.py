@@ -373,6 +373,17 @@ def test_region_shapes_saved_and_loaded(registered_workspace, tmp_path):
         ws.load_region(P3D / "rig.json")
 
 
+def _wizard(qtbot):
+    """A calibration wizard shown at a laptop's size."""
+    from plantreg_gui.gui.calibration.wizard import CalibrationWizard
+
+    w = CalibrationWizard()
+    qtbot.addWidget(w)
+    w.resize(1280, 720)
+    w.show()
+    return w
+
+
 PLANTS = ["01grapevine", "02leopard_lily", "03areca_palm", "04philodendron", "05boston_fern", "06weeping_fig"]
 
 
@@ -440,14 +451,9 @@ def test_wizard_save_asks_for_a_plant_depth_map(qtbot, demo_dir, tmp_path, monke
 
     from plantreg_gui.core.camera.rig import Rig
     from plantreg_gui.core.synthetic import GROUND_Z
-    from plantreg_gui.gui.calibration.wizard import CalibrationWizard
-
     folder = tmp_path / "session"
     shutil.copytree(demo_dir / "calibration", folder)
-    w = CalibrationWizard()
-    qtbot.addWidget(w)
-    w.resize(1280, 720)
-    w.show()
+    w = _wizard(qtbot)
     try:
         assert w.open_session(folder)
         w.go_to_page(7)
@@ -503,16 +509,11 @@ def test_wrong_board_size_is_named_on_pages_2_and_3(qtbot, shared_data, tmp_path
     from realcal import writable_copy
 
     from plantreg_gui.core.calibration import Session
-    from plantreg_gui.gui.calibration.wizard import CalibrationWizard
-
     folder = writable_copy(shared_data / "opencv-stereo", tmp_path / "stereo")
     meta = json.loads((folder / "session.json").read_text())
     meta["board"].update(columns=10, rows=7)
     (folder / "session.json").write_text(json.dumps(meta))
-    w = CalibrationWizard()
-    qtbot.addWidget(w)
-    w.resize(1280, 720)
-    w.show()
+    w = _wizard(qtbot)
     try:
         assert w.open_session(folder)
         w.go_to_page(2)
@@ -595,13 +596,8 @@ def test_corner_review_draws_residual_vectors_and_shows_undistorted(qtbot, share
 
     from realcal import writable_copy
 
-    from plantreg_gui.gui.calibration.wizard import CalibrationWizard
-
     folder = writable_copy(shared_data / "opencv-stereo", tmp_path / "stereo")
-    w = CalibrationWizard()
-    qtbot.addWidget(w)
-    w.resize(1280, 720)
-    w.show()
+    w = _wizard(qtbot)
     try:
         assert w.open_session(folder)
         w.go_to_page(4)
