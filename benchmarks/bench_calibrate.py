@@ -46,7 +46,8 @@ def load() -> str:
 
 
 def opencv_baseline(session: Path, cameras: list[str], pattern: tuple[int, int], square: float) -> dict:
-    """OpenCV's plain pipeline; returns seconds of detection and of the solve, and fx per camera."""
+    """OpenCV's plain pipeline; returns seconds of detection and of the solve, fx per camera and the
+    corners ("corners": camera -> pose -> (N, 1, 2) in OpenCV's order)."""
     obj = np.zeros((pattern[0] * pattern[1], 3), np.float32)
     obj[:, :2] = np.mgrid[0:pattern[0], 0:pattern[1]].T.reshape(-1, 2) * square
     crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
@@ -76,7 +77,7 @@ def opencv_baseline(session: Path, cameras: list[str], pattern: tuple[int, int],
     t2 = time.perf_counter()
     return {"detect_s": t1 - t0, "solve_s": t2 - t1, "total_s": t2 - t0,
             "found": {c: len(found[c]) for c in cameras}, "fx": {c: float(K[c][0, 0]) for c in cameras},
-            "stereo_rms": float(rms)}
+            "stereo_rms": float(rms), "corners": found}
 
 
 #: the environment plantreg's processes run in (:func:`installed_env`)

@@ -140,23 +140,23 @@ def _grid_uv(u) -> np.ndarray:
     return np.c_[uu.ravel(), vv.ravel()]
 
 
-def _grid_points(u, est: Camera) -> np.ndarray:
+def _grid_points(u, est: Camera, factor: float = 1.0) -> np.ndarray:
     xy = est.undistort_normalized(_grid_uv(u))
-    return np.c_[xy, np.ones(len(xy))] * u.distance_m
+    return np.c_[xy, np.ones(len(xy))] * u.distance_m * factor
 
 
-def true_among_boards_errors(cal, truth: Rig, cam: str, poses) -> tuple[np.ndarray, np.ndarray]:
-    """mrcal's "mean frames" truth: each grid point at the working distance, put on every
-    estimated board, carried to the same place on the true board (``poses``: the true
+def true_among_boards_errors(cal, truth: Rig, cam: str, poses, factor: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """mrcal's "mean frames" truth: each grid point at ``factor`` x the working distance, put on
+    every estimated board, carried to the same place on the true board (``poses``: the true
     (R_rig_board, t_rig_board) of pose_001, pose_002, ...), averaged and projected by the true
-    camera. (err (H, W) px, the reported ``sigma_boards``)."""
+    camera. (err (H, W) px, the reported ``sigma_boards_at[factor]``)."""
     u = cal.uncertainty[cam]
     est, tru = cal.rig.camera(cam), truth.camera(cam)
-    X_rig = est.to_rig(_grid_points(u, est))
+    X_rig = est.to_rig(_grid_points(u, est, factor))
     X_true = np.zeros_like(X_rig)
     for p, (Re, te) in cal.board_poses.items():
         Rt, tt = poses[int(p.split("_")[1]) - 1]
         X_true += ((X_rig - te) @ Re) @ Rt.T + tt
     q, _z = tru.project(X_true / len(cal.board_poses))
     e = np.linalg.norm(q - _grid_uv(u), axis=1).reshape(u.sigma_boards.shape)
-    return e, u.sigma_boards
+    return e, u.sigma_boards_at[factor]

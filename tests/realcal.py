@@ -47,6 +47,36 @@ def herrera_reference(shared: Path) -> dict:
             "R_ext_kinect": rR.T, "t_ext_kinect": -rR.T @ rt}
 
 
+#: Herrera's toolbox's own calibration of the two RGB cameras alone, before its depth camera's
+#: disparity planes are added (``calib0`` in the same full_set.mat as the published reference,
+#: PyojinKim/Kinect_calibration_toolbox dataset_original/full_set.mat @a7c32e6; made by
+#: toolbox/do_initial_rgb_calib.m: each camera from its corners, then one joint fit of both with
+#: k1 k2 p1 p2 k3). The shared set has no depth images, so this is what its RGB images determine
+#: by the toolbox's own method. K (3, 3) per camera, the external camera's pose as in
+#: :func:`herrera_reference`.
+_HERRERA_RGB_ONLY = {
+    "K_kinect": [[1062.8678746222645, 0.0, 624.3686768884835], [0.0, 1056.497792923035, 511.7922722147588],
+                 [0.0, 0.0, 1.0]],
+    "K_external": [[4085.4078900371337, 0.0, 1426.0288552709465], [0.0, 4061.0025989591145, 869.7790013995603],
+                   [0.0, 0.0, 1.0]],
+    "rR": [[0.999344166831335, 4.951068095388527e-05, 0.03621096199878566],
+           [-0.00025367148964122033, 0.9999840994172252, 0.005633521411721187],
+           [-0.036210107303905774, -0.00563901245019457, 0.999328289236138]],
+    "rt": [-0.010973155124676094, -0.06880421193225446, -0.01801468660872466],
+}
+
+
+def herrera_rgb_only_reference() -> dict:
+    """Herrera's toolbox's joint calibration of the Kinect RGB and external cameras from their
+    images alone (:data:`_HERRERA_RGB_ONLY`), in the form of :func:`herrera_reference`. The
+    published reference adds the Kinect's depth images (not in the shared set), which move the
+    Kinect's fx from 1062.87 to 1059.73 px and the external camera's from 4085.4 to 4073.1 px."""
+    d = _HERRERA_RGB_ONLY
+    rR, rt = np.array(d["rR"]), np.array(d["rt"])
+    return {"K_kinect": np.array(d["K_kinect"]), "K_external": np.array(d["K_external"]),
+            "R_ext_kinect": rR.T, "t_ext_kinect": -rR.T @ rt}
+
+
 def lepton_session(shared: Path, dst: Path, stamps: list[str] | None = None) -> Path:
     """FLIR Lepton 3.5 ('thermal', 120 x 160 palette PNG) + ZED 2i left ('rgb', 1280 x 720):
     one pose folder per time stamp present in both; 4 x 6 board of 55 mm squares."""

@@ -68,7 +68,9 @@ def test_stereo_pose_matches_bouguet_and_reports_its_uncertainty(stereo_run, sha
     u = report["uncertainty"]["right"]
     assert 0 < u["rotation_sigma_deg"] < 0.25 and 0 < u["translation_sigma_mm"] < 2
     assert u["std"]["fx"] > 0 and u["values"]["fx"] == pytest.approx(right.K[0, 0])
-    assert len(u["grid"]["sigma_px"]) >= 4 and u["add_views_here"]
+    # within the limits: no views asked for, the least certain regions still named
+    assert len(u["grid"]["sigma_px"]) >= 4 and u["add_views_here"] == [] and u["least_certain_regions"]
+    assert u["board_plane_spread_deg"] >= 10 and u["working_band_m"][0] < u["working_distance_m"] < u["working_band_m"][1]
     assert report["uncertainty"]["left"]["lens_model"]["cv_rms_px"]["k1k2"] > 0
     rows = (out / "report_uncertainty.csv").read_text().splitlines()
     assert rows[0] == "camera,parameter,value,std,unit" and any(r.startswith("right,rotation_deg,") for r in rows)

@@ -196,6 +196,7 @@ def _print_summary(session, detections, cal, report) -> None:
     print(f"board found in {n_found} of {sum(1 for d in detections.values() if d.status != 'missing')} images; "
           f"joint RMS {cal.joint_rms_px:.3f} px")
     from ..core.calibration.detect import VARIANT_TEXT, detection_summary
+    from ..core.calibration.uncertainty import limits_px
 
     for cam, c in detection_summary(detections)["cameras"].items():
         how = ", ".join(f"{VARIANT_TEXT.get(v, v)} {n}" for v, n in sorted(c["variants"].items(), key=lambda x: -x[1]))
@@ -218,16 +219,21 @@ def _print_summary(session, detections, cal, report) -> None:
         lm = c.lens_model_dict()
         print(f"  {'':14s} lens model: {lm.get('label', lm.get('model', '?'))} -- {lm.get('reason', '')}")
         if u is not None:
-            med, worst = u.summary("intrinsics")
-            line = (f"  {'':14s} projection uncertainty at {u.distance_m:.2f} m: median {med:.2f} px, worst {worst:.2f} px"
-                    f" ({', '.join(u.add_views)} least certain)")
+            med, worst = u.summary()
+            lim_med, lim_seen = limits_px(u)
+            lo, hi = u.band_m
+            at = f"{lo:.2f}-{hi:.2f} m (mrcal, among the boards)" if u.sigma_judged is not None else f"{u.distance_m:.2f} m"
+            line = (f"  {'':14s} projection uncertainty at {at}: median {med:.2f} px (limit {lim_med:.2f}), "
+                    f"worst where seen {u.covered_worst:.2f} px (limit {lim_seen:.2f}), worst {worst:.2f} px"
+                    f" ({', '.join(u.add_views)} {'need more views' if u.needs_views else 'least certain'})")
             if u.rotation_deg is not None:
                 line += f"; pose vs {cal.reference}: +- {u.rotation_deg:.3f} deg, +- {u.translation_mm:.2f} mm"
             print(line)
             if u.sigma_boards is not None:
                 far = ", ".join(f"{'far' if f >= 100 else f'{f:g}x'} {v:.2f}" for f, v in u.boards_by_distance.items())
-                print(f"  {'':14s} among the boards (mrcal): median {float(np.median(u.sigma_boards)):.2f} px"
-                      + (f"; at other distances: {far}" if far else ""))
+                mi = u.summary("intrinsics")[0]
+                print(f"  {'':14s} lens model alone (point fixed in the camera) at {u.distance_m:.2f} m: median {mi:.2f} px;"
+                      f" among the boards at other distances: {far}")
     if cal.flipped:
         print(f"symmetric board: corner order of {len(cal.flipped)} view(s) turned by 180 degrees to agree with the rig")
     cams = list(session.cameras)

@@ -7,9 +7,14 @@ delete points, undo/redo, fit the rig (core/rigfit/rigfit.py), nudge a camera's 
 (like OpenCalib's manual panel), refine from the images (core/rigfit/refine.py), save.
 
 Change notification is napari-style: ``session.events.<name>.connect(callback)``; callbacks get
-no arguments and read the session. Events: ``points`` (landmarks edited), ``rig`` (the rig
-changed: fit, nudge, refine, undo), ``selection`` (recording, camera, selected point or pending
-click), ``report`` (a new fit/refine report).
+no arguments and read the session. Events: ``points`` (landmarks edited, or their depths
+changed meaning: snapping switched), ``rig`` (the rig changed: fit, nudge, refine, undo),
+``selection`` (recording, camera, selected point or pending click), ``report`` (a new
+fit/refine report), ``options`` (a setting the fit uses: :attr:`LandmarkSession.snap_depth`).
+
+Each landmark's depth is checked as the fit checks it (:func:`~..core.rigfit.rigfit.check_landmark_depth`:
+on the surface under the click, snapped onto a nearer surface beside it, or left out) and shown
+in the table (:meth:`LandmarkSession.depth_checks`).
 
 Long work (fit, refine, the overlay's registration) is split into a pure *job* computed on
 copies (safe on a worker thread) and an ``apply_*`` that updates the session on the caller's
@@ -35,12 +40,14 @@ from ..core.data.landmarks import Landmark, LandmarkSet
 from ..core.progress import Reporter, ensure_reporter
 from ..core.data.recording import Recording
 from ..core.camera.rig import Rig
-from ..core.rigfit.rigfit import FitResult, RecordingLandmarks, evaluate_landmarks, fit_rig
+from ..core.rigfit.rigfit import (
+    DepthCheck, FitResult, RecordingLandmarks, check_landmark_depth, evaluate_landmarks, fit_rig,
+)
 from .events import Events
 
 
 class LandmarkEvents(Events):
-    NAMES = ("points", "rig", "selection", "report")
+    NAMES = ("points", "rig", "selection", "report", "options")
 
 
 @dataclass
@@ -84,6 +91,12 @@ class LandmarkSession:
         self.report: dict[str, Any] | None = None
         self.warnings: list[str] = []
         self.free: frozenset[str] = frozenset()
+        #: a landmark whose depth lies behind the surface beside it is put onto that surface
+        #: (True, as fit-rig) or left out of the fit (False, as fit-rig --no-snap-depth)
+        self.snap_depth = True
+        #: (recording, u, v, ground_z) -> DepthCheck (snapping on): a repaint, a fit or switching
+        #: snapping reads a landmark's depth once
+        self._depth_checks: dict[tuple, DepthCheck] = {}
         self._undo: list[tuple[dict, dict]] = []
         self._redo: list[tuple[dict, dict]] = []
         self.modified = False
@@ -127,6 +140,7 @@ class LandmarkSession:
         for i, k in enumerate(keys):
             progress(0.05 + 0.95 * i / len(keys), f"reading recording {i + 1}/{len(keys)}: {Path(k).name}")
             s.depth_m(k)  # reads the recording too (a bad one is reported here, not on first paint)
+            s.depth_checks(k)  # the table's depth flags, read here rather than on the first paint
         progress(1.0, "recordings read")
         return s
 
@@ -336,10 +350,38 @@ class LandmarkSession:
         self.events.points.emit()
         self.events.selection.emit()
 
+    # ------------------------------------------------------------------ depth under the landmarks
+    def set_snap_depth(self, on: bool) -> None:
+        """Snap a landmark whose depth lies behind the surface beside it onto that surface (True,
+        the default, as ``fit-rig``) or leave it out of the fit (False, ``--no-snap-depth``)."""
+        on = bool(on)
+        if on != self.snap_depth:
+            self.snap_depth = on
+            self.events.options.emit()
+            self.events.points.emit()  # depth flags and residuals changed
+
+    def depth_check(self, index: int, key: str | None = None) -> DepthCheck:
+        """How the fit takes point ``index`` of recording ``key`` (default the current one)'s depth."""
+        key = key or self.recording_key
+        lm = self.landmarks.recordings[key][index]
+        u, v = (float(a) for a in lm.depth_uv)
+        ck = (key, u, v, self.rig.ground_z)
+        if ck not in self._depth_checks:
+            if len(self._depth_checks) > 4096:
+                self._depth_checks.clear()
+            self._depth_checks[ck] = check_landmark_depth(self.depth_m(key), lm.depth_uv, self.rig.ground_z)
+        return self._depth_checks[ck].snapping(self.snap_depth)
+
+    def depth_checks(self, key: str | None = None) -> dict[int, DepthCheck]:
+        """:meth:`depth_check` of every point of recording ``key`` (default the current one)."""
+        key = key or self.recording_key
+        return {i: self.depth_check(i, key) for i in range(len(self.landmarks.recordings.get(key, [])))}
+
     # ------------------------------------------------------------------ residuals
     def _recording_landmarks(self, keys: list[str] | None = None) -> list[RecordingLandmarks]:
         keys = keys if keys is not None else [k for k, v in self.landmarks.recordings.items() if v]
-        return [RecordingLandmarks(k, self.depth_m(k), self.landmarks.recordings[k]) for k in keys]
+        return [RecordingLandmarks(k, self.depth_m(k), self.landmarks.recordings[k], snap_depth=self.snap_depth,
+                                   depth_checks=self.depth_checks(k)) for k in keys]
 
     def residuals(self, camera: str | None = None) -> dict[int, float]:
         """Residual (px, predicted minus clicked) of the current rig for each point of the current
@@ -359,13 +401,10 @@ class LandmarkSession:
 
     def predicted(self, index: int, camera: str | None = None) -> np.ndarray | None:
         """Where the current rig puts point ``index``'s depth pixel in ``camera`` (2,), or None."""
-        from ..core.rigfit.rigfit import landmark_depth
-
         camera = camera or self.camera
         lm = self.points[index]
-        z = landmark_depth(self.depth_m(), lm.depth_uv)
-        z = z[0] if isinstance(z, tuple) else z
-        if z is None or not np.isfinite(z):
+        z = self.depth_check(index).z_m  # the depth the fit uses (snapped, or none when left out)
+        if not np.isfinite(z):
             return None
         dcam = self.rig.depth()
         xy = dcam.undistort_normalized(lm.depth_uv[None])
@@ -375,10 +414,12 @@ class LandmarkSession:
 
     def table(self) -> list[dict[str, Any]]:
         """Rows for the points table of the current recording, worst first (no residual last):
-        ``index``, ``depth_uv``, ``camera_uv`` (or None), ``residual_px`` (or None), ``note``."""
+        ``index``, ``depth_uv``, ``camera_uv`` (or None), ``residual_px`` (or None), ``note``,
+        ``depth`` (:class:`DepthCheck`: how the fit takes the point's depth)."""
         res = self.residuals()
+        checks = self.depth_checks()
         rows = [{"index": i, "depth_uv": lm.depth_uv, "camera_uv": lm.cameras.get(self.camera),
-                 "residual_px": res.get(i), "note": lm.note} for i, lm in enumerate(self.points)]
+                 "residual_px": res.get(i), "note": lm.note, "depth": checks[i]} for i, lm in enumerate(self.points)]
         rows.sort(key=lambda d: (d["residual_px"] is None, -(d["residual_px"] or 0.0)))
         return rows
 
@@ -386,8 +427,8 @@ class LandmarkSession:
     def fit_job(self, free: frozenset[str] | None = None) -> Callable[..., FitResult]:
         """A routine ``(progress=Reporter) -> FitResult`` on copies of the current state."""
         rig = Rig.from_dict(self.rig.to_dict())
-        recs = [RecordingLandmarks(r.name, r.depth_m, [copy.deepcopy(lm) for lm in r.points])
-                for r in self._recording_landmarks()]
+        recs = [RecordingLandmarks(r.name, r.depth_m, [copy.deepcopy(lm) for lm in r.points], r.snap_depth,
+                                   r.depth_checks) for r in self._recording_landmarks()]
         free = self.free if free is None else free
 
         def job(progress: Reporter | None = None) -> FitResult:

@@ -51,7 +51,7 @@ from .bundle import DIST_NAMES, CameraBlock, bundle_adjust, param_names
 from .known import KnownIntrinsics, check_known_intrinsics, load_known_intrinsics, session_known_intrinsics
 from .lensmodel import MODEL_BY_NAME, ModelChoice, choose_model, fit_camera, focal_rel_std, principal_point_prior
 from .uncertainty import (MAX_PROJECTION_SIGMA_COVERED, MAX_PROJECTION_SIGMA_MEDIAN, MAX_TRANSLATION_SIGMA_MM,
-                          CameraUncertainty, projection_uncertainty, uncertainty_problems)
+                          CameraUncertainty, plane_spread_deg, projection_uncertainty, uncertainty_problems)
 from .detect import FOUND, MISSING, Detection, check_image_sizes, suggest_board_size
 from .session import Session
 
@@ -566,6 +566,8 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
         unc[cam] = projection_uncertainty(cam, K, dist, R, t, ba.cov[cam], ba.names[cam], (w, h),
                                           float(np.median(dists)), used_uv, cam == ref,
                                           (tb, ba.cov_cam_board[cam], ba.cov_board))
+        unc[cam].plane_spread_deg = plane_spread_deg(
+            [own_poses[p][0] for p in views[cam] if (p, cam) not in outliers and p in own_poses])
         cc = CameraCalibration(cam, session.cameras[cam], w, h, K, dist, rms, float(allr.mean()),
                                dict(sorted(per_view.items())), weak, len(per_view))
         cc.model = intr[cam][3]

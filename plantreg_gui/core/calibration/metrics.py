@@ -130,8 +130,9 @@ class CalibrationReport:
 
     def _uncertainty_csv(self) -> str:
         """One row per camera parameter: value and standard error; then each camera's projection
-        uncertainty (median and worst over the image, px) at its working distance, and mrcal's
-        figure (among the boards) there and at other multiples of it."""
+        uncertainty (median and worst over the image, px; mrcal's figure, the worst over the
+        working band, as the limits judge it), the lens model's alone, the camera's in the rig,
+        mrcal's figure at the working distance and at other multiples of it."""
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(["camera", "parameter", "value", "std", "unit"])
@@ -143,12 +144,17 @@ class CalibrationReport:
                 v = vals.get(k)
                 w.writerow([c, k, "" if v is None else f"{v:.6g}", f"{sd:.4g}" if sd > 0 else "fixed", unit])
             ps = u.get("projection_sigma_px", {})
-            for k in ("median", "worst", "rig_median", "rig_worst", "among_boards_median"):
+            for k in ("median", "worst", "worst_where_seen", "lens_alone_median", "lens_alone_worst",
+                      "rig_median", "rig_worst", "among_boards_median"):
                 if ps.get(k) is not None:
                     w.writerow([c, f"projection_sigma_{k}", "", f"{ps[k]:.4g}", "px"])
             for f, v in (ps.get("among_boards_median_by_distance") or {}).items():
                 w.writerow([c, f"projection_sigma_among_boards_median_at_{f}", "", f"{v:.4g}", "px"])
             w.writerow([c, "working_distance", f"{u.get('working_distance_m', float('nan')):.4g}", "", "m"])
+            for k, v in zip(("working_band_near", "working_band_far"), u.get("working_band_m") or ()):
+                w.writerow([c, k, f"{v:.4g}", "", "m"])
+            if u.get("board_plane_spread_deg") is not None:
+                w.writerow([c, "board_plane_spread", f"{u['board_plane_spread_deg']:.3g}", "", "deg"])
             lm = u.get("lens_model", {})
             if lm:
                 w.writerow([c, "lens_model", lm.get("model", ""), "", ""])

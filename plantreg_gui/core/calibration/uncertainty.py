@@ -48,10 +48,20 @@ MAX_PROJECTION_SIGMA_MEDIAN = (1.0, 0.002)
 #: an image nobody put a board in are extrapolation, shown on the heat map)
 MAX_PROJECTION_SIGMA_COVERED = (2.0, 0.004)
 MAX_TRANSLATION_SIGMA_MM = 10.0
+#: board planes all turned within this many degrees of one another (the largest angle between two
+#: views' board normals, in the camera's frame) are Zhang's degenerate case: parallel planes leave
+#: the focal length to the lens distortion and the noise, and the covariance (linearised at a
+#: solution that fits) does not show how little holds it
+MIN_PLANE_SPREAD_DEG = 10.0
 #: grid cells along the image's longer side
 GRID_CELLS = 24
 #: multiples of the working distance at which mrcal's figure is also reported (1000: far away)
 BOARDS_DISTANCE_FACTORS = (0.5, 2.0, 1000.0)
+#: multiples of the working distance over which the limits judge a camera (the worst of the three
+#: at each image point): a canopy's leaves lie nearer and farther than the board did, and a focal
+#: length that only the boards' own distance pins down shows there (a fronto-parallel session:
+#: a focal length off by e moves the points at 0.8x by e/4 of their distance from the centre)
+LIMIT_BAND = (0.8, 1.0, 1.25)
 
 
 @dataclass
@@ -81,37 +91,64 @@ class CameraUncertainty:
     sigma_boards: np.ndarray | None = None
     #: multiple of the working distance -> median of ``sigma_boards`` there (px)
     boards_by_distance: dict[float, float] = field(default_factory=dict)
+    #: multiple of the working distance (:data:`LIMIT_BAND`) -> (H, W) px, mrcal's figure there
+    sigma_boards_at: dict[float, np.ndarray] = field(default_factory=dict)
+    #: (H, W) px: the figure the limits judge: the worst of ``sigma_boards_at`` (mrcal's figure
+    #: over the working band) or, without board poses, ``sigma_intrinsics``
+    sigma_judged: np.ndarray | None = None
+    #: whether a limit is exceeded somewhere ``add_views`` names (else it names only where the
+    #: uncertainty is highest, within the limits)
+    needs_views: bool = False
+    #: the largest angle between two used views' board planes, deg (:func:`plane_spread_deg`)
+    plane_spread_deg: float | None = None
 
-    def summary(self, which: str = "intrinsics") -> tuple[float, float]:
-        """(median, worst) over the image, px."""
-        s = self.sigma_intrinsics if which == "intrinsics" else self.sigma_rig
+    @property
+    def judged(self) -> np.ndarray:
+        """(H, W) px: the figure the limits apply to (see ``sigma_judged``)."""
+        return self.sigma_judged if self.sigma_judged is not None else self.sigma_intrinsics
+
+    @property
+    def band_m(self) -> tuple[float, float]:
+        """The working band (nearest, farthest) in metres the limits judge."""
+        return LIMIT_BAND[0] * self.distance_m, LIMIT_BAND[-1] * self.distance_m
+
+    def summary(self, which: str = "judged") -> tuple[float, float]:
+        """(median, worst) over the image, px, of ``which``: "judged" (what the limits apply to),
+        "intrinsics" (the lens model alone) or "rig"."""
+        s = {"judged": self.judged, "intrinsics": self.sigma_intrinsics, "rig": self.sigma_rig}[which]
         return float(np.median(s)), float(np.max(s))
 
     @property
     def covered_worst(self) -> float:
-        """Worst projection uncertainty (px) over the grid cells some board view covered."""
+        """Worst judged projection uncertainty (px) over the grid cells some board view covered."""
         m = self.corners > 0
-        return float(np.max(self.sigma_intrinsics[m])) if m.any() else float("inf")
+        return float(np.max(self.judged[m])) if m.any() else float("inf")
 
     @property
     def diagonal(self) -> float:
         return float(np.hypot(self.width, self.height))
 
     def to_dict(self) -> dict[str, Any]:
+        mj, wj = self.summary("judged")
         mi, wi = self.summary("intrinsics")
         mr, wr = self.summary("rig")
         return {"std": self.std, "working_distance_m": self.distance_m,
-                "projection_sigma_px": {"median": mi, "worst": wi, "worst_where_seen": self.covered_worst,
+                "working_band_m": list(self.band_m),
+                "projection_sigma_px": {"median": mj, "worst": wj, "worst_where_seen": self.covered_worst,
+                                        "lens_alone_median": mi, "lens_alone_worst": wi,
                                         "rig_median": mr, "rig_worst": wr,
                                         "among_boards_median": float(np.median(self.sigma_boards))
                                         if self.sigma_boards is not None else None,
                                         "among_boards_median_by_distance": {
                                             f"{f:g}x": v for f, v in self.boards_by_distance.items()}},
                 "least_determined": self.worst_param,
+                "board_plane_spread_deg": self.plane_spread_deg,
                 "rotation_sigma_deg": self.rotation_deg, "translation_sigma_mm": self.translation_mm,
-                "add_views_here": self.add_views,
+                "add_views_here": self.add_views if self.needs_views else [],
+                "least_certain_regions": self.add_views,
                 "grid": {"u": self.grid_u.tolist(), "v": self.grid_v.tolist(),
-                         "sigma_px": np.round(self.sigma_intrinsics, 4).tolist(),
+                         "sigma_px": np.round(self.judged, 4).tolist(),
+                         "lens_alone_sigma_px": np.round(self.sigma_intrinsics, 4).tolist(),
                          "rig_sigma_px": np.round(self.sigma_rig, 4).tolist(),
                          "corners": self.corners.astype(int).tolist()}}
 
@@ -186,9 +223,16 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
     Jr = np.concatenate([Ji, -dq_dZ @ _skew(X_cam - t_cam_rig), dq_dZ], axis=2)
     sig_r = _worst_direction(np.einsum("nij,jk,nlk->nil", Jr, cov, Jr)).reshape(len(gv), len(gu))
     sig_b = None
+    boards_at: dict[float, np.ndarray] = {}
     if boards is not None:
-        X_rig = (X_cam - t_cam_rig) @ R_cam_rig
-        sig_b = sigma_among_boards(Jr, dq_dZ, X_rig, R_cam_rig, cov, *boards).reshape(len(gv), len(gu))
+        for f in LIMIT_BAND:
+            Xf = X_cam * f
+            _q, dq_dZf, Jif = project_jac(Xf, K, dist)
+            Jrf = np.concatenate([Jif, -dq_dZf @ _skew(Xf - t_cam_rig), dq_dZf], axis=2)
+            boards_at[f] = sigma_among_boards(Jrf, dq_dZf, (Xf - t_cam_rig) @ R_cam_rig, R_cam_rig, cov,
+                                              *boards).reshape(len(gv), len(gu))
+        sig_b = boards_at[1.0]
+    judged = np.max(np.stack(list(boards_at.values())), axis=0) if boards_at else sig_i
     # standard errors
     var = np.diag(cov)
     std: dict[str, float] = {}
@@ -199,8 +243,8 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
         rot = float(np.degrees(np.sqrt(max(np.trace(cov[4 + nd : 7 + nd, 4 + nd : 7 + nd]), 0.0))))
         trans = float(1000.0 * np.sqrt(max(np.trace(cov[7 + nd : 10 + nd, 7 + nd : 10 + nd]), 0.0)))
         std["rotation_deg"], std["translation_mm"] = rot, trans
-    # the parameter that contributes most to the worst point's variance
-    k = int(np.argmax(sig_i.ravel()))
+    # the parameter that contributes most (lens model alone) to the worst judged point's variance
+    k = int(np.argmax(judged.ravel()))
     contrib = [float(Ji[k, :, j] @ Ji[k, :, j]) * var[j] for j in range(4 + nd)]
     worst = param_names[int(np.argmax(contrib))] if max(contrib) > 0 else ""
     # coverage: views whose board covers each grid cell's centre
@@ -215,7 +259,7 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
         cnt += m
     # "add views here": regions holding the highest uncertainty, fewest corners first
     add = []
-    order = np.argsort(-sig_i.ravel())
+    order = np.argsort(-judged.ravel())
     for k in order[: max(3, len(order) // 10)]:
         r = _region(uv[k, 0], uv[k, 1], w, h)
         if r not in add:
@@ -224,6 +268,10 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
             break
     out = CameraUncertainty(name, std, float(distance_m), gu, gv, sig_i, sig_r, cnt, worst, rot, trans, add, w, h)
     out.sigma_boards = sig_b
+    out.sigma_boards_at = boards_at
+    out.sigma_judged = judged if boards_at else None
+    lim_med, lim_seen = limits_px(out)
+    out.needs_views = bool(out.summary()[0] > lim_med or out.covered_worst > lim_seen)
     if boards is not None:
         for f in BOARDS_DISTANCE_FACTORS:
             Xf = np.c_[xy, np.ones(len(xy))] * distance_m * f
@@ -232,6 +280,16 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
             out.boards_by_distance[f] = float(np.median(
                 sigma_among_boards(Jrf, dq_dZf, (Xf - t_cam_rig) @ R_cam_rig, R_cam_rig, cov, *boards)))
     return out
+
+
+def plane_spread_deg(R_cam_board: list[np.ndarray]) -> float:
+    """The largest angle (deg) between two views' board planes (normals: the third column of
+    each (3, 3) ``R_cam_board``; a plane's two sides are the same plane)."""
+    if len(R_cam_board) < 2:
+        return 0.0
+    n = np.array([R[:, 2] for R in R_cam_board])
+    c = np.abs(n @ n.T)
+    return float(np.degrees(np.arccos(np.clip(c.min(), -1.0, 1.0))))
 
 
 def limits_px(u: CameraUncertainty) -> tuple[float, float]:
@@ -245,18 +303,26 @@ def uncertainty_problems(unc: dict[str, CameraUncertainty], max_mm: float | None
     max_mm = MAX_TRANSLATION_SIGMA_MM if max_mm is None else max_mm
     out = []
     for name, u in unc.items():
-        med, _worst = u.summary("intrinsics")
+        med, _worst = u.summary()
         seen = u.covered_worst
         lim_med, lim_seen = limits_px(u)
         p = u.worst_param
         where = f"least determined: {p} +- {u.std.get(p, float('nan')):.3g}" if p else "the model is undetermined"
-        if not np.isfinite(med) or med > lim_med:
+        lo, hi = u.band_m
+        at = f"{lo:.2f}-{hi:.2f} m" if u.sigma_judged is not None else f"{u.distance_m:.2f} m"
+        focal = [k for k in ("fx", "fy") if u.std.get(k, 0.0) > 0]
+        if focal and u.plane_spread_deg is not None and u.plane_spread_deg < MIN_PLANE_SPREAD_DEG:
+            out.append(f"camera '{name}': its board views are all turned within {u.plane_spread_deg:.1f} deg of one "
+                       f"another (at least {MIN_PLANE_SPREAD_DEG:g} deg apart needed: parallel boards leave the focal length "
+                       f"to the lens distortion); least determined: {focal[0]} +- {u.std[focal[0]]:.3g}; add board "
+                       "views tilted 20-45 deg towards different sides")
+        elif not np.isfinite(med) or med > lim_med:
             out.append(f"camera '{name}': projection uncertainty {med:.2f} px (median over the image, at "
-                       f"{u.distance_m:.2f} m) exceeds the limit of {lim_med:.2f} px; {where}; add board views in the {', '.join(u.add_views)} of the image, "
+                       f"{at}) exceeds the limit of {lim_med:.2f} px; {where}; add board views in the {', '.join(u.add_views)} of the image, "
                        "tilted, at several distances")
         elif not np.isfinite(seen) or seen > lim_seen:
             out.append(f"camera '{name}': projection uncertainty up to {seen:.2f} px where it saw the board (at "
-                       f"{u.distance_m:.2f} m) exceeds the limit of {lim_seen:.2f} px; {where}; add board views in the {', '.join(u.add_views)} of the image, "
+                       f"{at}) exceeds the limit of {lim_seen:.2f} px; {where}; add board views in the {', '.join(u.add_views)} of the image, "
                        "tilted, at several distances")
         if u.rotation_deg is not None:
             # the pose judged by what it does where the camera sees: a rotation traded against the

@@ -119,6 +119,9 @@ class RecordingLandmarks:
     #: put a landmark whose depth lies behind the surface beside it onto that surface
     #: (:func:`depth_jump`; a click just past a leaf's edge reads the ground) -- else leave it out
     snap_depth: bool = True
+    #: the caller's :func:`check_landmark_depth` of ``points`` by index (same ``snap_depth``), to
+    #: spare reading them again (the landmark page repaints on every drag step); None = read here
+    depth_checks: dict[int, "DepthCheck"] | None = None
 
 
 @dataclass
@@ -251,8 +254,9 @@ def depth_jump(depth_m: np.ndarray, uv: np.ndarray, z: float, ground_z: float | 
     right beside it (the ground or a leaf behind, seen through a notch or just past a leaf's
     edge): two thirds of the pixels with depth in the (2r+1)^2 window lie more than 5 cm + 5 %
     nearer, or, for a depth within 5 cm of the ground plane ``ground_z``, a quarter of those in
-    the 7x7 core. Returns ``("", nan)`` or ``(reason, z_snapped)``: the nearer surface's
-    depth at the click (a plane in inverse depth through its pixels, weighted towards the click)."""
+    the 7x7 core or one within :data:`EDGE_REACH_PX` of the click. Returns ``("", nan)`` or
+    ``(reason, z_snapped)``: the depth at the click of the nearer surface nearest to it (a plane
+    in inverse depth through its pixels, weighted towards the click)."""
     H, W = depth_m.shape
     u0, v0 = int(round(float(uv[0]))), int(round(float(uv[1])))
     a0, a1, b0, b1 = max(0, v0 - radius), min(H, v0 + radius + 1), max(0, u0 - radius), min(W, u0 + radius + 1)
@@ -264,23 +268,103 @@ def depth_jump(depth_m: np.ndarray, uv: np.ndarray, z: float, ground_z: float | 
     cv, cu = v0 - a0, u0 - b0
     core_ok, core_near = (m[max(0, cv - 3):cv + 4, max(0, cu - 3):cu + 4] for m in (ok, near))
     at_ground = ground_z is not None and z > ground_z - 0.05
+    d_near = _nearest(near, cv, cu)
     # surrounded by a nearer surface (a notch, a hole); or at the ground's depth right beside one
-    # (a click just past a leaf's edge; a lower leaf beside an upper one's edge is a fair landmark)
-    if near.sum() < 0.65 * ok.sum() and not (at_ground and core_ok.sum() and core_near.sum() >= 0.25 * core_ok.sum()):
+    # (a click on a leaf's corner or tip that the ToF's valid depth stops short of; a lower leaf
+    # beside an upper one's edge is a fair landmark)
+    beside = at_ground and (core_ok.sum() and core_near.sum() >= 0.25 * core_ok.sum() or d_near <= EDGE_REACH_PX)
+    if near.sum() < 0.65 * ok.sum() and not beside:
         return "", math.nan
-    vv, uu = np.nonzero(near)
-    zn = win[near]
-    lead = np.median(zn)
-    keep = np.abs(zn - lead) < 0.03 + 0.03 * lead  # the main nearer surface, not a mix of several
-    du, dv = uu[keep] + b0 - uv[0], vv[keep] + a0 - uv[1]
-    zs = inverse_depth_plane(zn[keep], du, dv, np.exp(-(du ** 2 + dv ** 2) / (2.0 * (0.5 * radius) ** 2)))
-    if not (np.isfinite(zs) and zn[keep].min() - 0.02 <= zs <= zn[keep].max() + 0.02):
-        zs = float(lead)
+    # the nearer surface nearest the click (one leaf's corner, not a mix of the leaves around it)
+    vn, un = np.nonzero(near)
+    j = int(np.argmin(np.hypot(vn - cv, un - cu)))
+    sel = grow_surface(win, near, (int(vn[j]), int(un[j])))
+    if sel.sum() < 5:  # a sliver: the main nearer surface instead
+        sel = near & (np.abs(win - np.median(win[near])) < 0.03 + 0.03 * np.median(win[near]))
+    lead, zs = _plane_at_click(win, sel, uv, a0, b0, 0.5 * radius)
     where = " (the ground's depth)" if at_ground else ""
-    return (f"depth {z:.3f} m{where} lies {100 * (z - lead):.0f} cm behind the surface filling "
-            f"{100 * near.sum() / ok.sum():.0f} % of its {2 * radius + 1}x{2 * radius + 1} neighbourhood "
-            f"({lead:.3f} m) and reaching to within {_nearest(near, cv, cu):.0f} px of it: a click past a leaf's "
-            "edge or through a notch"), float(zs)
+    return (f"depth {z:.3f} m{where} lies {100 * (z - lead):.0f} cm behind the surface "
+            f"({lead:.3f} m) reaching to within {d_near:.0f} px of it and filling "
+            f"{100 * near.sum() / ok.sum():.0f} % of its {2 * radius + 1}x{2 * radius + 1} neighbourhood: a click "
+            "past a leaf's edge or through a notch"), float(zs)
+
+
+def _plane_at_click(win: np.ndarray, sel: np.ndarray, uv: np.ndarray, a0: int, b0: int, sigma_px: float
+                    ) -> tuple[float, float]:
+    """(median depth, depth at the click ``uv``) of the surface ``sel`` (h, w) bool of the depth
+    window ``win`` (h, w) whose top-left pixel is (row ``a0``, column ``b0``): a plane in inverse
+    depth through its pixels weighted towards the click (Gaussian, ``sigma_px``), kept within 2 cm
+    of the surface's depths (else the median)."""
+    vv, uu = np.nonzero(sel)
+    zn = win[sel]
+    lead = float(np.median(zn))
+    du, dv = uu + b0 - uv[0], vv + a0 - uv[1]
+    zs = inverse_depth_plane(zn, du, dv, np.exp(-(du ** 2 + dv ** 2) / (2.0 * sigma_px ** 2)))
+    if not (np.isfinite(zs) and zn.min() - 0.02 <= zs <= zn.max() + 0.02):
+        zs = lead
+    return lead, float(zs)
+
+
+#: how far (px) beside a click that reads the ground a leaf's valid depth may end and the click
+#: still count as on that leaf: the Azure Kinect's valid depth ends 2-4 px (thin tips up to 6.5 px)
+#: short of the leaf's edge in its infrared image (resources/plant3dimagereg/README.md, "Raw clicks"
+#: and "How the landmarks were made", step 3)
+EDGE_REACH_PX = 7.0
+
+
+@dataclass(frozen=True)
+class DepthCheck:
+    """What a landmark's depth pixel gives the fit (:func:`check_landmark_depth`).
+
+    ``status``: ``"ok"`` (the surface under the click), ``"snapped"`` (the click read a surface
+    behind the one beside it and was put onto the nearer one), ``"left out"`` (the same, with
+    snapping off) or ``"no depth"``. ``read_m``: the depth read under the click (nan without
+    one); ``z_m``: the depth the fit uses (nan when left out or none); ``reason``: why, for
+    anything but ``"ok"``."""
+
+    status: str
+    z_m: float
+    read_m: float
+    reason: str = ""
+    #: the nearer surface's depth at the click where the depth jumps (nan otherwise)
+    snap_m: float = math.nan
+
+    @property
+    def used(self) -> bool:
+        return math.isfinite(self.z_m)
+
+    def snapping(self, snap: bool) -> "DepthCheck":
+        """This check with snapping on or off (a jump is snapped or left out; others unchanged)."""
+        if self.status not in ("snapped", "left out") or (self.status == "snapped") == snap:
+            return self
+        if snap:
+            return DepthCheck("snapped", self.snap_m, self.read_m, self.reason.removesuffix(_LEFT_OUT), self.snap_m)
+        return DepthCheck("left out", math.nan, self.read_m, self.reason + _LEFT_OUT, self.snap_m)
+
+    @property
+    def snapped_mm(self) -> float:
+        """How far nearer the snapped depth is than the one read (mm; nan unless snapped)."""
+        return 1000.0 * (self.read_m - self.z_m) if self.status == "snapped" else math.nan
+
+
+def check_landmark_depth(depth_m: np.ndarray, uv: np.ndarray, ground_z: float | None = None, snap: bool = True
+                         ) -> DepthCheck:
+    """The depth a landmark at the depth pixel ``uv`` (2,) gets in a fit, from the depth map
+    ``depth_m`` (H, W) metres: :func:`landmark_depth`, then :func:`depth_jump` against the
+    surface beside it (``ground_z``: the rig's ground plane depth), snapped onto that surface
+    (``snap``) or left out. The one place the fit, the CLI report and the landmark page decide it."""
+    z, reason = landmark_depth(depth_m, uv)
+    if not np.isfinite(z):
+        # not put on the front surface beside it: measured on the real pairs as read, the 3 such
+        # clicks made the held-out plants worse (docs/fit-rig.md, "From raw files to a rig")
+        return DepthCheck("no depth", math.nan, math.nan, reason)
+    jump, z_snap = depth_jump(depth_m, uv, z, ground_z)
+    if not jump:
+        return DepthCheck("ok", z, z)
+    return DepthCheck("snapped", z_snap, z, jump, z_snap).snapping(snap)
+
+
+_LEFT_OUT = "; left out (--no-snap-depth)"
 
 
 def _nearest(mask: np.ndarray, i: int, j: int) -> float:
@@ -463,20 +547,17 @@ def _collect(rig: Rig, recordings: Sequence[RecordingLandmarks], cameras: set[st
             cams = {c: uv for c, uv in lm.cameras.items() if c != dname and (cameras is None or c in cameras)}
             if not cams:
                 continue
-            z, reason = landmark_depth(rec.depth_m, lm.depth_uv)
-            if np.isfinite(z):
-                jump, z_snap = depth_jump(rec.depth_m, lm.depth_uv, z, rig.ground_z)
-                if jump and rec.snap_depth:
-                    rejected.append({"recording": rec.name, "index": li, "note": lm.note,
-                                     "depth_uv": [float(v) for v in lm.depth_uv], "reason": jump,
-                                     "depth_m": float(z), "snapped_to_m": z_snap})
-                    z = z_snap
-                elif jump:
-                    z, reason = math.nan, jump + "; left out (--no-snap-depth)"
-            if not np.isfinite(z):
+            chk = (rec.depth_checks or {}).get(li) or check_landmark_depth(rec.depth_m, lm.depth_uv, rig.ground_z,
+                                                                            rec.snap_depth)
+            if chk.status == "snapped":
                 rejected.append({"recording": rec.name, "index": li, "note": lm.note,
-                                 "depth_uv": [float(v) for v in lm.depth_uv], "reason": reason})
+                                 "depth_uv": [float(v) for v in lm.depth_uv], "reason": chk.reason,
+                                 "depth_m": chk.read_m, "snapped_to_m": chk.z_m})
+            if not chk.used:
+                rejected.append({"recording": rec.name, "index": li, "note": lm.note,
+                                 "depth_uv": [float(v) for v in lm.depth_uv], "reason": chk.reason})
                 continue
+            z = chk.z_m
             L = len(duv)
             duv.append(lm.depth_uv)
             zs.append(z)

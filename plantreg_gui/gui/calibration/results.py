@@ -36,7 +36,7 @@ def intrinsic_rows(cal, report=None) -> list[dict[str, Any]]:
                      "normalized": nn, "rms": float(c.rms_px), "views": int(c.n_views or len(c.per_view_px)),
                      "weak": [p for p, _e, _r in c.weak_views],
                      "std": dict(u.std) if u is not None else {},
-                     "sigma": u.summary("intrinsics") if u is not None else None,
+                     "sigma": u.summary() if u is not None else None,
                      "model": lm.get("label", lm.get("model", "")), "model_reason": lm.get("reason", ""),
                      "model_cv": lm.get("cv_rms_px", {})})
     return rows
@@ -195,10 +195,12 @@ def uncertainty_maps(cal) -> list[dict[str, Any]]:
 
     out = []
     for name, u in uncertainty(cal).items():
-        med, worst = u.summary("intrinsics")
+        med, worst = u.summary()
         lim = limits_px(u)[0]
-        title = (f"{name}: σ median {med:.2f}, worst {worst:.2f} px (limit {lim:.2f})\n"
-                 f"add views: {', '.join(u.add_views)}")
-        out.append({"camera": name, "sigma": u.sigma_intrinsics, "corners": u.corners, "limit": lim,
+        lo, hi = u.band_m
+        where = (f"add views: {', '.join(u.add_views)}" if u.needs_views
+                 else f"within the limits; least certain: {', '.join(u.add_views)}")
+        title = (f"{name}: σ median {med:.2f}, worst {worst:.2f} px (limit {lim:.2f}) at {lo:.2f}-{hi:.2f} m\n{where}")
+        out.append({"camera": name, "sigma": u.judged, "corners": u.corners, "limit": lim,
                     "aspect": u.width / max(u.height, 1), "title": title})
     return out

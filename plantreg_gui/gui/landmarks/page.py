@@ -4,6 +4,8 @@ Left: the depth camera's image (infrared), right: the chosen camera, third: the 
 registered into the infrared by the current rig (blend / checkerboard / flicker). Click a point
 on the left, then the same point on the right; drag a marker to move it (zoom in for sub-pixel
 placement); the residual of every point is drawn next to it (red line: where the rig puts it).
+The table says what depth the fit takes for each point (on the surface, snapped onto a nearer
+surface, or left out; the "snap depth" switch chooses between the last two, as fit-rig does).
 Fit, refine (on workers, with progress and cancel), nudge the camera's pose with keys, undo,
 save. All state and computation are in the session; this widget only shows it and forwards
 the user's actions.
@@ -14,11 +16,12 @@ Qt-free :class:`~plantreg_gui.models.landmarks.LandmarkSession`.
 
 from __future__ import annotations
 
+import html
 from pathlib import Path
 
 import numpy as np
 from PySide6.QtCore import Qt, QTimer, Signal
-from PySide6.QtGui import QKeySequence, QShortcut
+from PySide6.QtGui import QColor, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
     QAbstractItemView, QCheckBox, QComboBox, QDoubleSpinBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout,
     QLabel, QPlainTextEdit, QProgressBar, QPushButton, QSlider, QSplitter, QTableWidget, QTableWidgetItem,
@@ -70,6 +73,24 @@ NUDGE_KEYS = {
     Qt.Key.Key_Up: ("translate", 1, -1), Qt.Key.Key_Down: ("translate", 1, +1),
     Qt.Key.Key_PageUp: ("translate", 2, +1), Qt.Key.Key_PageDown: ("translate", 2, -1),
 }
+
+#: the points table's columns
+TABLE_COLUMNS = ("#", "residual px", "depth", "depth u, v", "camera u, v", "note")
+#: what a landmark's depth check adds to its marker's label, and its table cell's background
+DEPTH_MARK = {"snapped": " (depth snapped)", "left out": " (depth left out)", "no depth": " (no depth)"}
+DEPTH_COLOURS = {"snapped": (255, 200, 120), "left out": (255, 150, 150), "no depth": (255, 150, 150)}
+
+
+def depth_text(chk) -> str:
+    """A :class:`~plantreg_gui.core.rigfit.rigfit.DepthCheck` for the table's depth column."""
+    if chk.status == "ok":
+        return f"{chk.z_m:.3f} m"
+    if chk.status == "snapped":
+        return f"{chk.z_m:.3f} m, snapped {chk.snapped_mm:.0f} mm nearer"
+    if chk.status == "left out":
+        return f"left out ({chk.read_m:.3f} m, behind)"
+    return "no depth"
+
 
 FREE_PRESETS = {
     "pose": (),
@@ -143,6 +164,13 @@ class LandmarkPage(QWidget):
         self.depth_free = QCheckBox("depth camera k1 + principal")
         self.depth_free.setToolTip("also fit the depth camera's first radial term and principal point "
                                    "(the Azure Kinect's lens is strongly distorted)")
+        self.snap_depth = QCheckBox("snap depth to the nearer surface")
+        self.snap_depth.setChecked(True)
+        self.snap_depth.setToolTip(
+            "a landmark whose depth lies behind the surface beside it (a click just past a leaf's edge or "
+            "through a notch reads the ground) is put onto that surface; unchecked: it is left out of the fit "
+            "(fit-rig --no-snap-depth). The table's depth column says which landmarks this concerns.")
+        self.snap_depth.toggled.connect(lambda on: self._do(lambda: self.session.set_snap_depth(on)))
         self.fit_button = QPushButton("Fit")
         self.fit_button.setToolTip("fit the rig to all landmarks of all recordings (F)")
         self.fit_button.clicked.connect(self.run_fit)
@@ -173,8 +201,8 @@ class LandmarkPage(QWidget):
             top.addWidget(w)
         top.addStretch(1)
         second = QHBoxLayout()
-        for w in (QLabel("Fit frees"), self.free_combo, self.depth_free, self.fit_button, self.refine_button,
-                  self.cancel_button, self.progress):
+        for w in (QLabel("Fit frees"), self.free_combo, self.depth_free, self.snap_depth, self.fit_button,
+                  self.refine_button, self.cancel_button, self.progress):
             second.addWidget(w)
         second.addStretch(1)
 
@@ -243,8 +271,11 @@ class LandmarkPage(QWidget):
             views.addWidget(box)
         views.setSizes([500, 500, 500])
 
-        self.table = QTableWidget(0, 5)
-        self.table.setHorizontalHeaderLabels(["#", "residual px", "depth u, v", "camera u, v", "note"])
+        self.table = QTableWidget(0, len(TABLE_COLUMNS))
+        self.table.setHorizontalHeaderLabels(list(TABLE_COLUMNS))
+        self.table.horizontalHeaderItem(TABLE_COLUMNS.index("depth")).setToolTip(
+            "the depth the fit uses: the surface under the click, snapped onto a nearer surface beside it, "
+            "or left out (hover a cell for why)")
         self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.table.setSelectionMode(QAbstractItemView.SelectionMode.SingleSelection)
         self.table.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
@@ -341,6 +372,8 @@ class LandmarkPage(QWidget):
         s.events.selection.connect(self._selection_changed)
         s.events.rig.connect(self._rig_changed)
         s.events.report.connect(self._report_changed)
+        s.events.options.connect(self._options_changed)
+        self._options_changed()
         self.recording_combo.blockSignals(True)
         self.recording_combo.clear()
         self.recording_combo.addItems(s.recording_keys)
@@ -458,8 +491,11 @@ class LandmarkPage(QWidget):
         left, right = [], []
         for i, lm in enumerate(s.points):
             r = res.get(i)
-            label = f"{i}" + (f": {r:.1f} px" if r is not None else "")
+            chk = s.depth_check(i)
+            label = f"{i}" + (f": {r:.1f} px" if r is not None else "") + DEPTH_MARK.get(chk.status, "")
             col = (255, 220, 0) if r is None or r < 3 else (255, 140, 0) if r < 8 else (255, 60, 60)
+            if not chk.used:  # not in the fit: no residual to colour by
+                col = (255, 60, 60)
             if s.camera not in lm.cameras:  # a point of another camera: grey, drawn underneath
                 left.insert(0, Marker(i, lm.depth_uv, "", colour=(150, 150, 150)))  # no label: they pile up
                 continue
@@ -480,17 +516,28 @@ class LandmarkPage(QWidget):
         self.table.setRowCount(len(rows))
         for r, d in enumerate(rows):
             vals = [str(d["index"]), "—" if d["residual_px"] is None else f"{d['residual_px']:.2f}",
-                    f"{d['depth_uv'][0]:.1f}, {d['depth_uv'][1]:.1f}",
+                    depth_text(d["depth"]), f"{d['depth_uv'][0]:.1f}, {d['depth_uv'][1]:.1f}",
                     "—" if d["camera_uv"] is None else f"{d['camera_uv'][0]:.1f}, {d['camera_uv'][1]:.1f}", d["note"]]
             for c, v in enumerate(vals):
                 it = QTableWidgetItem(v)
                 it.setData(Qt.ItemDataRole.UserRole, d["index"])
                 self.table.setItem(r, c, it)
+            chk = d["depth"]
+            cell = self.table.item(r, TABLE_COLUMNS.index("depth"))
+            if chk.status != "ok":
+                cell.setToolTip(chk.reason)
+                cell.setBackground(QColor(*DEPTH_COLOURS[chk.status]))
+                cell.setForeground(QColor(0, 0, 0))
             if d["index"] == s.selected:
                 self.table.selectRow(r)
         self.table.resizeColumnsToContents()
         self.table.blockSignals(False)
         self._sync_enabled()
+
+    def _options_changed(self) -> None:
+        self.snap_depth.blockSignals(True)
+        self.snap_depth.setChecked(self.session.snap_depth)
+        self.snap_depth.blockSignals(False)
 
     def _selection_changed(self) -> None:
         s = self.session
@@ -502,12 +549,28 @@ class LandmarkPage(QWidget):
         if s.pending is not None:
             self.hint.setText(f"Now click the same point in <b>{s.camera}</b> (Esc cancels).")
         elif s.selected is not None:
+            chk = s.depth_check(s.selected)
+            depth = "" if chk.status == "ok" else (
+                f" Depth check: {html.escape(chk.reason, quote=False)}"
+                + (f"; snapped to {chk.z_m:.3f} m." if chk.status == "snapped" else "."))
             self.hint.setText(f"Point {s.selected} selected: drag it to move, Del to delete. "
-                              f"{n} points in this recording.")
+                              f"{n} points in this recording.{depth}")
+            self._show_selected_row()
         else:
             self.hint.setText(f"{n} points in this recording, {s.landmarks.count()} in all. Click a point in "
                               f"the depth camera, then in {s.camera}. Wheel zooms, drag pans, double-click fits.")
         self._sync_enabled()
+
+    def _show_selected_row(self) -> None:
+        t, sel = self.table, self.session.selected
+        for r in range(t.rowCount()):
+            if t.item(r, 0) is not None and int(t.item(r, 0).data(Qt.ItemDataRole.UserRole)) == sel:
+                if r not in {i.row() for i in t.selectedItems()}:
+                    t.blockSignals(True)
+                    t.selectRow(r)
+                    t.blockSignals(False)
+                t.scrollToItem(t.item(r, 0))
+                return
 
     def _rig_changed(self) -> None:
         self._overlay_timer.start()
@@ -553,7 +616,7 @@ class LandmarkPage(QWidget):
         s = self.session
         busy = self.is_busy(include_overlay=False)
         for b in (self.fit_button, self.refine_button, self.save_rig_button, self.save_lm_button,
-                  self.recording_combo, self.camera_combo):
+                  self.recording_combo, self.camera_combo, self.snap_depth):
             b.setEnabled(s is not None and not busy)
         self.undo_button.setEnabled(s is not None and not busy and s.can_undo())
         self.redo_button.setEnabled(s is not None and not busy and s.can_redo())
