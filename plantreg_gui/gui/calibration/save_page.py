@@ -427,7 +427,10 @@ class SavePage(WizardPage):
         if not self.plant_loaded():
             msgs.append("Set the ROI from a plant: 'Load plant depth map…' (a recording of a plant "
                         "with this rig). The board poses only show where the board was.")
-        set_banner(self.roi_msg, " ".join(msgs), error=any(m.startswith("⚠") for m in msgs))
+        if msgs:
+            set_banner(self.roi_msg, " ".join(msgs), error=any(m.startswith("⚠") for m in msgs))
+        elif "⚠" in self.roi_msg.text() or self.roi_msg.text().startswith("Set the ROI from a plant"):
+            set_banner(self.roi_msg, "")  # what it said no longer holds; "ROI fitted to ..." stays
 
     def plant_loaded(self) -> bool:
         """Whether a plant's depth map has been loaded (the only thing that can check an ROI)."""
