@@ -267,7 +267,11 @@ class Cloud:
             elif v.shape[1] == 3:
                 lines.append(f"{name}: (" + ", ".join(f"{float(x):.4g}" for x in v[i]) + ")" + (f" {unit}" if unit else ""))
             else:
-                lines.append(f"{name}: {v.shape[1]} bands, mean {float(np.nanmean(v[i])):.4g}" + (f" {unit}" if unit else ""))
+                x = np.asarray(v[i], np.float64)
+                if not np.isfinite(x).any():  # no value of this camera at the point
+                    lines.append(f"{name}: {v.shape[1]} bands, —")
+                    continue
+                lines.append(f"{name}: {v.shape[1]} bands, mean {float(np.nanmean(x)):.4g}" + (f" {unit}" if unit else ""))
         return "\n".join(lines)
 
 
