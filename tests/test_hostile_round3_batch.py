@@ -219,6 +219,34 @@ def _wait_for_part(folder: Path, pattern: str, proc: subprocess.Popen, timeout: 
     return None
 
 
+def _signal_while_writing(cmd: list[str], folder: Path, pattern: str, out: Path, sig: int,
+                         tries: int = 5, settle: float = 0.0) -> tuple[subprocess.Popen, str]:
+    """Run ``cmd`` in its own process group and send ``sig`` to the group when a hidden ``pattern``
+    output appears in ``folder``. On a loaded machine this test process may be scheduled again
+    only after the run has finished (the signal then finds no process, or one that has already
+    moved its complete result into place and exits 0): such a try must leave a complete ``out``
+    and nothing hidden, and is made again. Returns the process and its stderr of the first try
+    the signal reached while it ran."""
+    for _ in range(tries):
+        p = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
+        part = _wait_for_part(folder, pattern, p)
+        if part is not None:
+            time.sleep(settle)
+            try:
+                os.killpg(p.pid, sig)
+            except ProcessLookupError:
+                pass
+        _o, err = p.communicate(timeout=300)
+        if part is not None and p.returncode != 0:
+            return p, err
+        # finished before it was caught: a complete result, nothing hidden beside it
+        assert p.returncode == 0 and out.is_dir() and _leftovers(out) == [], (p.returncode, err)
+        assert not [x for x in folder.iterdir() if x.name.startswith(".")], list(folder.iterdir())
+        shutil.rmtree(out)
+    raise AssertionError(f"the signal never reached the run while it wrote ({tries} tries)")
+
+
 @pytest.fixture(scope="module")
 def two_recordings(demo_dir, tmp_path_factory):
     """Two copies of the demo recording (640 x 576 target: writing takes long enough to be caught)."""
@@ -260,22 +288,9 @@ def test_sigterm_to_the_batch_process_group_leaves_no_part(two_recordings, tmp_p
     ``.rec02.XXXX.part`` with a partial TIFF), exit 143, no traceback, no lock file."""
     rig, recs = two_recordings
     out = tmp_path / "out"
-    tries = 0
-    while True:
-        tries += 1
-        p = subprocess.Popen([*PLANTREG, "batch", "--rig", str(rig), "--target", "ir", "--out", str(out),
-                              "--workers", "1", "--quiet", *map(str, recs)], env=_env(), stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True, start_new_session=True)
-        part = _wait_for_part(out, ".rec0*.part", p)
-        if part is None and tries < 3:  # finished before it could be caught (a lost race): again
-            p.communicate(timeout=60)
-            shutil.rmtree(out, ignore_errors=True)
-            continue
-        assert part is not None, "no worker was seen writing"
-        time.sleep(0.05)
-        os.killpg(p.pid, signal.SIGTERM)
-        _out, err = p.communicate(timeout=120)
-        break
+    p, err = _signal_while_writing([*PLANTREG, "batch", "--rig", str(rig), "--target", "ir", "--out", str(out),
+                                    "--workers", "1", "--quiet", *map(str, recs)], tmp_path, "out/.rec0*.part",
+                                   out, signal.SIGTERM, settle=0.05)
     time.sleep(0.5)  # a worker that outlived its parent would still be writing now
     assert p.returncode == 128 + signal.SIGTERM, (p.returncode, err)
     assert "Traceback" not in err
@@ -295,18 +310,7 @@ def test_signal_to_register_while_it_writes_leaves_nothing(two_recordings, tmp_p
     SIGUSR1 and SIGALRM used to end it on the spot, leaving ``.out.XXXX.part``)."""
     rig, recs = two_recordings
     out = tmp_path / "out"
-    for attempt in range(3):
-        p = subprocess.Popen(_register_cmd(rig, recs[0], out), env=_env(), stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True, start_new_session=True)
-        part = _wait_for_part(tmp_path, ".out.*", p)
-        if part is None and attempt < 2:
-            p.communicate(timeout=60)
-            shutil.rmtree(out, ignore_errors=True)
-            continue
-        assert part is not None
-        os.killpg(p.pid, sig)
-        _o, err = p.communicate(timeout=120)
-        break
+    p, err = _signal_while_writing(_register_cmd(rig, recs[0], out), tmp_path, ".out.*", out, sig)
     assert p.returncode == 128 + sig, (p.returncode, err)
     assert "Traceback" not in err and "core dumped" not in err
     assert sorted(x.name for x in tmp_path.iterdir()) == [], list(tmp_path.iterdir())

@@ -63,6 +63,9 @@ MIN_CV_VIEWS = 4
 #: writes nothing and exits non-zero unless ``--max-rms`` allows more (docs/errors.md).
 MAX_RMS_PX = 2.0
 WEAK_FACTOR, WEAK_MIN_EXCESS_PX, WEAK_POSE_DEG = 2.0, 0.1, 1.0
+#: a view's board pose is weak when it disagrees with the rig by more than this many standard
+#: errors of its own pose (and more than WEAK_POSE_DEG)
+WEAK_POSE_SIGMAS = 3.0
 INCONSISTENT_DEG = 5.0
 #: relative standard error of a camera's focal length from its own views above which its own
 #: views are taken not to determine its lens (placed last, from the board corners in 3D)
@@ -233,9 +236,12 @@ def _known_intrinsics_poses(known: "KnownIntrinsics", views: dict[str, Detection
 
 
 def _per_view_errors(K, dist, views: dict[str, Detection], board: Board,
-                     init: dict[str, tuple[np.ndarray, np.ndarray]] | None = None):
+                     init: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
+                     rot_sd: dict[str, float] | None = None):
     """Mean corner distance per view with the view's own board pose (PnP with the final model).
-    Returns {pose: px}, {pose: (R_cam_board, t)}, {pose: residual vectors (N, 2)}, rms."""
+    Returns {pose: px}, {pose: (R_cam_board, t)}, {pose: residual vectors (N, 2)}, rms. With
+    ``rot_sd`` (filled in): pose -> standard error (deg, per px of corner noise) of that own
+    pose's rotation, from the Jacobian of its corners' projection."""
     out, poses, resid = {}, {}, {}
     sq = []
     for p, d in views.items():
@@ -246,8 +252,16 @@ def _per_view_errors(K, dist, views: dict[str, Detection], board: Board,
         else:
             ok, rv, tv = cv2.solvePnP(obj, img, K, dist)
         rv, tv = cv2.solvePnPRefineLM(obj, img, K, dist, rv, tv)
-        proj = cv2.projectPoints(obj, rv, tv, K, dist)[0].reshape(-1, 2)
+        proj, jac = cv2.projectPoints(obj, rv, tv, K, dist)
+        proj = proj.reshape(-1, 2)
         r = proj - img
+        if rot_sd is not None:
+            J = jac[:, :6]
+            try:
+                cov = np.linalg.inv(J.T @ J)
+                rot_sd[p] = float(np.degrees(np.sqrt(max(np.trace(cov[:3, :3]), 0.0))))
+            except np.linalg.LinAlgError:
+                rot_sd[p] = float("inf")
         out[p] = float(np.mean(np.linalg.norm(r, axis=1)))
         poses[p] = (cv2.Rodrigues(rv)[0], tv.ravel())
         resid[p] = r
@@ -542,8 +556,10 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
     for cam in cams:
         K, dist, R, t = cam_res[cam]
         init = {p: (R @ board_res[p][0], R @ board_res[p][1] + t) for p in views[cam]}
+        rot_sd: dict[str, float] = {}
         per_view, own_poses, resid, rms = _per_view_errors(
-            K, dist, views[cam], board, {p: v for p, v in init.items() if (p, cam) not in outliers})
+            K, dist, views[cam], board, {p: v for p, v in init.items() if (p, cam) not in outliers}, rot_sd)
+        noise = ba.sigma_cam.get(cam, rms / np.sqrt(2.0))
         allr = np.concatenate([np.linalg.norm(r, axis=1) for r in resid.values()])
         weak = []
         med = float(np.median(list(per_view.values())))
@@ -552,8 +568,12 @@ def calibrate(session: Session, detections: dict[tuple[str, str], Detection],
             ang = _angle_deg(Rown @ init[p][0].T)
             view_pose_deg[(p, cam)] = ang
             view_board_cam[(p, cam)] = own_poses[p]
-            if (p, cam) in outliers or ang > WEAK_POSE_DEG:
+            # a view's own pose is uncertain too (a 160 px thermal image's by ~1 deg): only a
+            # disagreement beyond 3 of its standard errors says the view is bad
+            own_sd = rot_sd.get(p, 0.0) * noise
+            if (p, cam) in outliers or ang > max(WEAK_POSE_DEG, WEAK_POSE_SIGMAS * own_sd):
                 weak.append((p, e, f"board pose disagrees with the other cameras by {ang:.1f} deg"
+                             + (f" ({ang / own_sd:.1f} x its own pose's standard error)" if own_sd > 0 else "")
                              + (" (corner order flipped? check the polarity)" if ang > 150 else "")
                              + ("; left out of the joint estimate" if (p, cam) in outliers else "")))
             elif e > max(WEAK_FACTOR * med, med + WEAK_MIN_EXCESS_PX):

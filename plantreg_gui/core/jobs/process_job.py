@@ -77,10 +77,21 @@ class _ChildToken(CancelToken):
             raise Cancelled()
 
 
+#: the fraction of a job's last message: every progress message of the job came before it (one
+#: queue, one feeder thread), and the result comes through the pool's own channel, which may
+#: overtake them on a loaded machine
+_END = -1.0
+#: how long the parent waits for a finished job's last messages (a job whose process died sends none)
+END_WAIT_S = 10.0
+
+
 def _child_run(job: int, fn: Callable[..., Any], args: tuple, kwargs: dict) -> Any:
     q = _child["queue"]
     rep = Reporter(lambda f, m: q.put((job, float(f), str(m))), _ChildToken(_child["cancel"], _child["parent"]))
-    return fn(*args, progress=rep, **kwargs)
+    try:
+        return fn(*args, progress=rep, **kwargs)
+    finally:
+        q.put((job, _END, ""))
 
 
 def _noop(progress: Reporter | None = None) -> None:
@@ -142,11 +153,14 @@ def run_in_process(fn: Callable[..., Any], *args: Any, progress: Reporter | None
                 break
         job = next(_ids)
         fut = pool.submit(_child_run, job, fn, args, kwargs)
-        cancelled_at = None
+        cancelled_at = done_at = None
+        ended = False
         while True:
             try:
                 j, f, m = q.get(timeout=0.05)
-                if j == job and cancelled_at is None:
+                if j == job and f == _END:
+                    ended = True
+                elif j == job and cancelled_at is None:
                     progress(f, m)
             except queue.Empty:
                 pass
@@ -156,7 +170,13 @@ def run_in_process(fn: Callable[..., Any], *args: Any, progress: Reporter | None
                 ev.set()
                 cancelled_at = _now()
             if fut.done():
-                break
+                # the job's progress may still be on its way: wait for its last message (none
+                # comes from a process that died)
+                if ended or cancelled_at is not None or isinstance(fut.exception(), cf.process.BrokenProcessPool):
+                    break
+                done_at = done_at if done_at is not None else _now()
+                if _now() - done_at > END_WAIT_S:
+                    break
             if cancelled_at is not None and _now() - cancelled_at > CANCEL_GRACE_S:
                 _kill_pool()
                 raise Cancelled()

@@ -72,7 +72,9 @@ def _draw_axes(p: QPainter, panel: _Panel, title: str, ylabel: str, xlabels: lis
         p.drawText(QPointF(r.left() - 5 - fm.horizontalAdvance(s), y + fm.ascent() / 2 - 1), s)
     p.setBrush(Qt.BrushStyle.NoBrush)  # the frame only: the brush is left from the previous panel's bars
     p.drawRect(r)
-    step = max(1, math.ceil(len(xlabels) * (fm.horizontalAdvance("00") + 4) / max(r.width(), 1)))
+    # every step-th label, so that the longest (pose names may be time stamps) do not overlap
+    lw = max((fm.horizontalAdvance(s) for s in xlabels), default=0) + 8
+    step = max(1, math.ceil(len(xlabels) * lw / max(r.width(), 1)))
     for i, s in enumerate(xlabels):
         if i % step == 0:
             p.drawText(QPointF(panel.x(i) - fm.horizontalAdvance(s) / 2, r.bottom() + fm.ascent() + 2), s)
@@ -346,7 +348,8 @@ class UncertaintyMap(_Chart):
             for li, line in enumerate(str(m["title"]).split("\n")[:2]):  # two lines, each elided to fit
                 p.drawText(QRectF(x0 + 4, y0 + 2 + li * fm.height(), cw - 8, fm.height()), Qt.AlignmentFlag.AlignLeft,
                            fm.elidedText(line, Qt.TextElideMode.ElideRight, int(cw - 8)))
-            worst = set(np.argsort(-sig.ravel())[:3].tolist())
+            # outlined: where more views are asked for (only when a limit is exceeded)
+            worst = set(np.argsort(-sig.ravel())[:3].tolist()) if m.get("needs_views", True) else set()
             sx, sy = pw / gw, ph / gh
             for i in range(gh):
                 for j in range(gw):

@@ -85,7 +85,7 @@ class ExtrinsicsPage(WizardPage):
                 vals = [c.name + (f" ({', '.join(tags)})" if tags else ""),
                         fmt(ctr[0], 1), fmt(ctr[1], 1), fmt(ctr[2], 1), fmt(ang, 2), fmt(np.linalg.norm(ctr), 1),
                         "–" if ref else f"{u.rotation_deg:.3f}", "–" if ref else f"{u.translation_mm:.2f}",
-                        f"{rig_sig[0]:.2f} / {rig_sig[1]:.2f}" if rig_sig else "–"]
+                        f"{rig_sig[0]:.2f} / {rig_sig[1]:.2f}" if rig_sig and not ref else "–"]
                 for j, v in enumerate(vals):
                     self.poses.setItem(i, j, item(v, bold=(j == 0)))
             self.poses.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)

@@ -28,10 +28,11 @@ class IntrinsicsPage(WizardPage):
         lower = QSplitter(Qt.Orientation.Horizontal)
         lower.addWidget(self.chart)
         self.umap = UncertaintyMap()
-        self.umap.setToolTip("Projection uncertainty over each camera's image (px, at the working distance): how far "
-                             "a point may project from where the calibration puts it (1 sigma, least certain "
-                             "direction). Green: well within the camera's limit; red: at or beyond it. Hatched: no "
-                             "board corner was seen there. Outlined: where more board views would shrink it most.")
+        self.umap.setToolTip("Projection uncertainty over each camera's image (px; mrcal's figure, the worst over "
+                             "0.8-1.25x the boards' distance): how far a point may project from where the "
+                             "calibration puts it (1 sigma, least certain direction). Green: well within the camera's limit; red: at or beyond it. Hatched: no "
+                             "board corner was seen there. Outlined (when a limit is exceeded): where more board views "
+                             "would shrink it most.")
         lower.addWidget(self.umap)
         lower.setSizes([700, 450])
         split.addWidget(lower)
@@ -135,15 +136,17 @@ class IntrinsicsPage(WizardPage):
                     it.setToolTip("OpenCV distortion coefficients ± standard error:\n" + "\n".join(
                         f"{names[k]} = {results.pm(d, sd.get(names[k]), 6)}" for k, d in enumerate(r["dist"])))
                 if j == 7:
-                    it.setToolTip("Projection uncertainty over the image at the working distance (1 sigma, px): "
-                                  "median and worst; see the heat map")
+                    it.setToolTip("Projection uncertainty over the image (1 sigma, px; mrcal's figure, the worst over "
+                                  "0.8-1.25x the boards' distance): median and worst; see the heat map")
                 self.table.setItem(i, j, it)
         hh = self.table.horizontalHeader()
         hh.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         hh.setSectionResizeMode(6, QHeaderView.ResizeMode.Stretch)
         self.table.resizeRowsToContents()
         h = self.table.horizontalHeader().height() + sum(self.table.rowHeight(i) for i in range(len(rows)))
-        h += 2 * self.table.frameWidth() + 2
+        # the distortion column may need the horizontal scroll bar: keep every camera's row visible
+        h += 2 * self.table.frameWidth() + 2 + self.table.horizontalScrollBar().sizeHint().height()
+        self.table.setMinimumHeight(h)
         self.table.setMaximumHeight(h)
         self.split.setSizes([h, max(self.split.height() - h, 300)])
         per_view = results.per_view_px(cal)

@@ -202,5 +202,6 @@ def uncertainty_maps(cal) -> list[dict[str, Any]]:
                  else f"within the limits; least certain: {', '.join(u.add_views)}")
         title = (f"{name}: σ median {med:.2f}, worst {worst:.2f} px (limit {lim:.2f}) at {lo:.2f}-{hi:.2f} m\n{where}")
         out.append({"camera": name, "sigma": u.judged, "corners": u.corners, "limit": lim,
+                    "needs_views": u.needs_views,
                     "aspect": u.width / max(u.height, 1), "title": title})
     return out
