@@ -88,11 +88,11 @@ def _run_until(app, cond, timeout_s: float) -> None:
 
 
 def _step(app, name: str, action, cond, trace: bool, rows: list) -> None:
-    from stall_probe import StallProbe
+    from stall_probe import LoadControl, StallProbe
 
     probe = StallProbe()
     t0 = time.perf_counter()
-    with probe:
+    with LoadControl() as control, probe:  # the control: what the machine's load did to any process
         dog = _Watchdog(probe).start() if trace else None
         action()
         _run_until(app, cond, 600)
@@ -101,7 +101,8 @@ def _step(app, name: str, action, cond, trace: bool, rows: list) -> None:
     wall = time.perf_counter() - t0
     rows.append((name, probe.max_gap * 1000, len(probe.stalls(0.2)), wall))
     print(f"  {name:<44} max gap {probe.max_gap * 1000:7.0f} ms   gaps>200ms {len(probe.stalls(0.2)):3d}   "
-          f"wall {wall:6.1f} s", flush=True)
+          f"wall {wall:6.1f} s   control stretch {control.stretch:5.1f}x (gap / stretch "
+          f"{probe.max_gap * 1000 / control.stretch:5.0f} ms)", flush=True)
     if dog is not None:
         for k, n in dog.samples.most_common(8):
             print(f"      {n:4d} x {k}")
@@ -123,6 +124,13 @@ def bench_set(app, label: str, source: Path, trace: bool) -> list:
         _step(app, "open session + detect (page 2)", lambda: (w.open_session(folder, resume=False), w.go_to_page(2)),
               idle, trace, rows)
         _step(app, "calibrate (page 4)", lambda: w.go_to_page(4), idle, trace, rows)
+        rp = w.pages[2]
+        if hasattr(rp, "undistort"):  # the corner review's residual vectors and undistorted view
+            cam = w.model.session.camera_names[0]
+            pose = next(p for (p, c), d in w.model.detections.items() if c == cam and d.status == "found")
+            _step(app, "corner review: residuals, undistorted", lambda: (w.show_view(cam, pose),
+                  rp.undistort.setChecked(True)), lambda: rp.shown_undistorted, trace, rows)
+            rp.undistort.setChecked(False)
         view3d = w.pages[4].view3d  # its scene is drawn in stages after the tables: wait for the last
         _step(app, "error tables (page 5)", lambda: w.go_to_page(5), lambda: idle() and not view3d.building,
               trace, rows)

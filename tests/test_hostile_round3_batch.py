@@ -418,3 +418,27 @@ def test_deferred_section_on_a_worker_thread_holds_the_signal():
         signals.uninstall(old)
     assert e.value.signum == signal.SIGTERM and e.value.code == 128 + signal.SIGTERM
     assert events[0] == "section done" and sorted(events[1:]) == ["main terminated", "second refused"], events
+
+
+def test_a_signal_while_the_staged_tiffs_are_put_away_leaves_no_folder(tmp_path):
+    """A terminating signal that lands while register leaves its staged-TIFF context normally (the
+    run's end, waiting for the encoder thread) used to skip the removal of the hidden
+    ``.out.XXXX.part`` folder (SIGALRM beside two CPU hogs); the signal still ends the run."""
+    from plantreg_gui.core.export.tiffs import EarlyTiffs
+    from plantreg_gui.core.signals import Terminated
+
+    early = EarlyTiffs(tmp_path / "out")
+    early.__enter__()
+    assert [p.name.startswith(".out.") for p in tmp_path.iterdir()] == [True]
+    real, calls = early._pool.shutdown, []
+
+    def shutdown(*a, **k):  # the signal's handler raises on the main thread during the first wait
+        calls.append(k)
+        if len(calls) == 1:
+            raise Terminated(signal.SIGALRM)
+        return real(*a, **k)
+
+    early._pool.shutdown = shutdown
+    with pytest.raises(Terminated):
+        early.__exit__(None, None, None)
+    assert list(tmp_path.iterdir()) == []

@@ -166,4 +166,6 @@ def _run_locked(args, jobs, out: Path, rig_path: Path, options, params) -> int:
     for r in sorted(rows.values(), key=lambda r: order[r["name"]]):
         if r["status"] == "failed":
             print(f"  failed {show_path(r['recording'])}: {one_line(r['error'])}")
+        elif r.get("warnings"):
+            print(f"  warning {show_path(r['recording'])}: {one_line(r['warnings'])}", file=sys.stderr)
     return 1 if counts["failed"] or len(rows) < len(jobs) else 0

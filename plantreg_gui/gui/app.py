@@ -65,19 +65,14 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("QT_API", "pyside6")
     from PySide6.QtWidgets import QApplication
 
-    from .main_window import MainWindow
-
     app = QApplication.instance() or QApplication(sys.argv[:1])
     app.setApplicationName("plantreg")
     app.setOrganizationName("plantreg")
     app.setApplicationVersion(__version__)
     app.setDesktopFileName("plantreg-gui")  # Wayland's app id: the installed entry's icon and name
-    from .startup import preload_with_splash
+    from .startup import open_main_window
 
-    preload_with_splash(app, __version__)  # the 3D stack, before any window takes input
-    win = MainWindow()
-    win.resize(w, h)
-    win.show()
+    win = open_main_window(app, __version__, (w, h))  # the 3D stack loaded before any window takes input
     try:
         win.apply_start_options(args)
     except Exception as e:  # user mistakes reach the user as text, not a traceback

@@ -42,8 +42,8 @@ def preload(modules: tuple[str, ...] = HEAVY_MODULES, open3d: bool = True) -> fl
     return time.perf_counter() - t0
 
 
-def preload_with_splash(app, version: str) -> float:
-    """:func:`preload` behind a small splash screen (nothing to click while it runs)."""
+def show_splash(app, version: str):
+    """A small splash screen (nothing to click), shown at once; returns it."""
     from PySide6.QtCore import Qt
     from PySide6.QtGui import QColor, QFont, QPainter, QPixmap
     from PySide6.QtWidgets import QSplashScreen
@@ -63,11 +63,33 @@ def preload_with_splash(app, version: str) -> float:
     p.drawText(26, 78, f"version {version} — multimodal 3D registration")
     p.end()
     splash = QSplashScreen(pix)
-    splash.showMessage("Loading the 3D viewer and the ray caster…", Qt.AlignmentFlag.AlignBottom | Qt.AlignmentFlag.AlignLeft,
-                       QColor("#9fb3c8"))
     splash.show()
+    splash_message(splash, "Loading the 3D viewer and the ray caster…")
     app.processEvents()
-    secs = preload()
-    splash.close()
+    return splash
+
+
+def splash_message(splash, text: str) -> None:
+    from PySide6.QtCore import Qt
+    from PySide6.QtGui import QColor
+
+    splash.showMessage(text, Qt.AlignmentFlag.AlignBottom | Qt.AlignmentFlag.AlignLeft, QColor("#9fb3c8"))
+
+
+def open_main_window(app, version: str, size: tuple[int, int], window_class=None):
+    """The start-up: :func:`preload` behind a splash screen, then the main window built and
+    shown while the splash still stands, which goes away only once the window is on screen (the
+    window's construction was a second of nothing on screen between splash and window).
+    ``window_class``: the window to build (default :class:`~.main_window.MainWindow`)."""
+    splash = show_splash(app, version)
+    preload()
+    splash_message(splash, "Opening the window…")
+    app.processEvents()
+    if window_class is None:
+        from .main_window import MainWindow as window_class
+    win = window_class()
+    win.resize(*size)
+    win.show()
+    splash.finish(win)  # closes the splash once the window is exposed
     splash.deleteLater()
-    return secs
+    return win

@@ -22,11 +22,14 @@ class WizardModel:
     """The wizard's state. Events: ``session_changed()``, ``detection_changed(key)`` (a Key, or
     None for "many changed"), ``review_changed()``, ``calibration_changed()``,
     ``report_changed()``, ``saved_changed()``, ``poses_changed()`` (pose folders added to or
-    removed from the session), ``view_selected(key)`` (show this image in the corner review).
+    removed from the session), ``view_selected(key)`` (show this image in the corner review),
+    ``board_hint_changed()`` (see :meth:`set_board_hint`), ``review_display_changed()`` (the
+    corner review's display choices: :attr:`review_undistorted`).
     ``parent`` is accepted for the wizard's call and not used (the model owns no Qt object)."""
 
     EVENTS = ("session_changed", "detection_changed", "review_changed", "calibration_changed", "report_changed",
-              "saved_changed", "poses_changed", "view_selected")
+              "saved_changed", "poses_changed", "view_selected", "board_hint_changed",
+              "review_display_changed")
 
     def __init__(self, parent: Any = None) -> None:
         for name in self.EVENTS:
@@ -39,6 +42,8 @@ class WizardModel:
         self.calibration_stale = False
         self.report_stale = False
         self.saved_paths: dict[str, str] = {}
+        self.board_hint: tuple[int, int] | None = None  # (columns, rows) found where the session's board was not
+        self.review_undistorted = False  # the corner review shows images undistorted with the calibrated model
 
     # ------------------------------------------------------------------ session
     def set_session(self, session) -> None:
@@ -49,6 +54,7 @@ class WizardModel:
         self.report = None
         self.calibration_stale = self.report_stale = False
         self.saved_paths = {}
+        self.board_hint = None
         self.session_changed.emit()
         self.calibration_changed.emit()
         self.report_changed.emit()
@@ -187,6 +193,49 @@ class WizardModel:
         self.poses_changed.emit()
         self.detection_changed.emit(None)
         return problems
+
+    def set_review_undistorted(self, on: bool) -> None:
+        """Show the corner review's images undistorted with the calibrated model (or as taken)."""
+        if bool(on) != self.review_undistorted:
+            self.review_undistorted = bool(on)
+            self.review_display_changed.emit()
+
+    def set_board_hint(self, hint: tuple[int, int] | None) -> None:
+        """A chessboard size (columns, rows) found in the images of a camera that found none of
+        the session's board (None: no such camera, or no other size found either)."""
+        hint = tuple(hint) if hint else None
+        if hint != self.board_hint:
+            self.board_hint = hint
+            self.board_hint_changed.emit()
+
+    def board_hint_text(self) -> str:
+        """The hint in words (empty without one)."""
+        if self.board_hint is None or self.session is None:
+            return ""
+        b = self.session.board
+        return (f"No {b.columns} x {b.rows} board was found, but a {self.board_hint[0]} x {self.board_hint[1]} one was: "
+                "the board size is wrong (count inner corners, where four squares meet).")
+
+    def use_board_hint(self) -> bool:
+        """Set the session's board to the hinted size and save the session (the caller detects
+        again, e.g. by reopening the session). False without a hint or if it cannot be saved."""
+        import dataclasses
+
+        from ..core.errors import PlantregError
+
+        if self.board_hint is None or self.session is None:
+            return False
+        s = self.session
+        old = s.board
+        s.board = dataclasses.replace(old, columns=self.board_hint[0], rows=self.board_hint[1])
+        if not s.writable():  # (the rule of _save_review) the size holds for this run only
+            return True
+        try:
+            s.save()
+        except (PlantregError, OSError):
+            s.board = old
+            return False
+        return True
 
     def set_saved_paths(self, paths: dict[str, str]) -> None:
         self.saved_paths = dict(paths)

@@ -249,16 +249,29 @@ class Cloud:
     modalities: dict[str, str] = field(default_factory=dict)
     units: dict[str, str] = field(default_factory=dict)      # name -> unit (the layer's); else the modality's
 
-    def point_text(self, i: int) -> str:
-        p = self.points[i]
-        lines = [f"point {i}: x={p[0]*1000:.1f} y={p[1]*1000:.1f} z={p[2]*1000:.1f} mm (rig frame)"]
+    def point_text(self, i: int, previous: int | None = None) -> str:
+        """Point ``i``'s position and every layer's value there, each with its unit; lengths in
+        millimetres throughout (the points are stored in metres). With ``previous`` (an earlier
+        pick), the distance between the two points too."""
+        p = self.points[i].astype(np.float64)
+        lines = [f"point {i}: x={p[0]*1000:.1f} y={p[1]*1000:.1f} z={p[2]*1000:.1f} mm (rig frame), "
+                 f"{np.linalg.norm(p)*1000:.1f} mm from the rig origin"]
+        if previous is not None and previous != i and 0 <= previous < len(self.points):
+            q = self.points[previous].astype(np.float64)
+            lines.append(f"distance to point {previous} (previous pick): {np.linalg.norm(p - q)*1000:.1f} mm")
         for name, v in self.values.items():
+            unit = self.units.get(name)
+            unit = _mod.unit(self.modalities.get(name, name)) if unit is None else unit
             if v.ndim == 1:
                 lines.append(f"{name}: {format_value(float(v[i]), self.modalities.get(name, name), self.units.get(name))}")
             elif v.shape[1] == 3:
-                lines.append(f"{name}: (" + ", ".join(f"{float(x):.4g}" for x in v[i]) + ")")
+                lines.append(f"{name}: (" + ", ".join(f"{float(x):.4g}" for x in v[i]) + ")" + (f" {unit}" if unit else ""))
             else:
-                lines.append(f"{name}: {v.shape[1]} bands, mean {float(np.nanmean(v[i])):.4g}")
+                x = np.asarray(v[i], np.float64)
+                if not np.isfinite(x).any():  # no value of this camera at the point
+                    lines.append(f"{name}: {v.shape[1]} bands, —")
+                    continue
+                lines.append(f"{name}: {v.shape[1]} bands, mean {float(np.nanmean(x)):.4g}" + (f" {unit}" if unit else ""))
         return "\n".join(lines)
 
 

@@ -518,6 +518,25 @@ def checkerboard(a: np.ndarray, b: np.ndarray, tile: int) -> np.ndarray:
     return mosaic([a, b], tile)
 
 
+def shown_colours(composed_rgb8: np.ndarray, codes: np.ndarray, wanted, step: int = 4) -> dict[int, tuple[int, int, int]]:
+    """The colour each code in ``wanted`` shows as in ``composed_rgb8`` (H, W, 3) uint8 (an
+    :func:`overlay` of ``codes`` (H, W)): the median over its pixels (every ``step``-th row and
+    column). A legend swatch in this colour matches the map: a tint at partial opacity over a dark
+    picture is darker than the pure colour (orange reads brown). Codes without pixels are left out."""
+    full_img, full_codes = np.asarray(composed_rgb8), np.asarray(codes)
+    img = full_img[::step, ::step].reshape(-1, 3)
+    c = full_codes[::step, ::step].ravel()
+    out = {}
+    for code in wanted:
+        sel = c == int(code)
+        px = img[sel]
+        if len(px) < 50:  # a rare code: all its pixels
+            px = full_img[full_codes == int(code)]
+        if len(px):
+            out[int(code)] = tuple(int(v) for v in np.median(px, axis=0))
+    return out
+
+
 def blend(a: np.ndarray, b: np.ndarray, alpha: float) -> np.ndarray:
     """``(1 - alpha) * a + alpha * b`` for uint8 images of one shape."""
     if a.shape != b.shape:

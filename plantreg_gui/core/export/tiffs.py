@@ -98,8 +98,16 @@ class EarlyTiffs:
         import shutil
 
         self._stop.set()
-        self._pool.shutdown(wait=True, cancel_futures=True)
-        shutil.rmtree(self._dir, ignore_errors=True)
+        try:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+        finally:
+            # a terminating signal may interrupt the wait above (leaving by success: nothing is
+            # unwinding yet), which left the folder behind; the writer was told to stop, so wait for
+            # it again (later signals are ignored while this one unwinds), then remove the folder
+            try:
+                self._pool.shutdown(wait=True)
+            finally:
+                shutil.rmtree(self._dir, ignore_errors=True)
 
 
 def _hit_tiles(reg: HitImage) -> Callable[[int, int, int, int], np.ndarray | None]:

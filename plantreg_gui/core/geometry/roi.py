@@ -17,6 +17,13 @@ An ROI that leaves most of that out cuts the plant. The check does not judge wha
 frames and cables around the plant, which a hand-set ROI rightly drops (on the six
 Plant3DImageReg recordings they make up 65-76 % of the measured depth in front of the floor, so
 "most of the scene is cut" was true of an ROI that keeps every plant whole).
+
+The far side is checked too: a ground plane (max z) set in or just behind the ground, a table or
+the background puts that surface inside the ROI, and registration calls it certain object (the
+demo's ground at 1.20 m under the default ROI's 1.20 m: twice as many "object" pixels as lie on
+the plant). Nothing of a plant lies within ``GROUND_BAND_M`` in front of a well-set ground plane
+(the six Plant3DImageReg ROIs: at most 0.1 % of their measured depth; the default ROI over the
+same plants 4-24 %).
 """
 
 from __future__ import annotations
@@ -29,6 +36,8 @@ GROUND_CLEARANCE_M = 0.03  # a fitted ground plane sits this far in front of the
 CENTRAL_PERCENTILES = (20.0, 80.0)  # the middle of the view: these percentiles of x/z and of y/z
 CANOPY_PERCENTILE = 25.0  # the plant's top: the nearest quarter of the measured points there
 CUT_WARN_FRACTION = 0.5  # warn when the ROI leaves out more than half of them
+GROUND_BAND_M = 0.05  # measured depth this close in front of the ground plane is the ground's
+GROUND_WARN_FRACTION = 0.10  # warn when more of the ROI's measured depth lies there
 
 
 def _finite(points: np.ndarray) -> np.ndarray:
@@ -73,8 +82,9 @@ def cut_fraction(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[fl
     return float(1.0 - inside.mean()), int(len(C))
 
 
-def cut_warning(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> str | None:
-    """A sentence when the ROI leaves out most of the canopy (more than CUT_WARN_FRACTION), else None."""
+def cut_warning(points: np.ndarray, lo: np.ndarray, hi: np.ndarray, advice: bool = True) -> str | None:
+    """A sentence when the ROI leaves out most of the canopy (more than CUT_WARN_FRACTION), else
+    None. ``advice``: end with what to do about it."""
     frac, n = cut_fraction(points, lo, hi)
     if n < 100 or frac <= CUT_WARN_FRACTION:
         return None
@@ -82,8 +92,40 @@ def cut_warning(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> str | Non
     z = np.percentile(canopy_points(points)[:, 2], [5, 95])
     return (f"the ROI (min {np.round(lo, 3).tolist()}, max {np.round(hi, 3).tolist()} m, ground plane at "
             f"z = {hi[2]:.2f} m) leaves out {100 * frac:.0f} % of the plant's top (the nearest measured depth in "
-            f"the middle of the view, z = {z[0]:.2f}-{z[1]:.2f} m): the registration covers only part of the plant. Set the "
-            "rig's ROI from a depth map of a plant recording (calibration wizard, page 7)")
+            f"the middle of the view, z = {z[0]:.2f}-{z[1]:.2f} m): the registration covers only part of the plant"
+            + (". Set the rig's ROI from a depth map of a plant recording (calibration wizard, page 7)" if advice else ""))
+
+
+def ground_share(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[float, int, np.ndarray]:
+    """Share of the measured points of ``points`` (..., 3) rig frame inside the ROI [lo, hi] (3,)
+    that lie within GROUND_BAND_M in front of its ground plane z = hi[2], the number of measured
+    points inside the ROI, and those near points (M, 3)."""
+    X = _finite(points)
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    inside = X[np.all((X >= lo) & (X <= hi), axis=1)]
+    if not len(inside):
+        return 0.0, 0, inside
+    near = inside[inside[:, 2] > hi[2] - GROUND_BAND_M]
+    return float(len(near) / len(inside)), int(len(inside)), near
+
+
+def ground_warning(points: np.ndarray, lo: np.ndarray, hi: np.ndarray, advice: bool = True) -> str | None:
+    """A sentence when the ROI's ground plane lies in (or just behind) a measured surface: more
+    than GROUND_WARN_FRACTION of the measured depth inside the ROI within GROUND_BAND_M in front
+    of it (see :func:`ground_share`); else None, and None when the ROI cuts the plant (then the
+    surface at its ground plane is the plant's: :func:`cut_warning` says so). ``advice``: end with
+    what to do about it."""
+    frac, n, _near = ground_share(points, lo, hi)
+    if n < 100 or frac <= GROUND_WARN_FRACTION or cut_warning(points, lo, hi) is not None:
+        return None
+    hi = np.asarray(hi, float)
+    text = (f"the ROI's ground plane (max z = {hi[2]:.2f} m) lies in a measured surface: {100 * frac:.0f} % of the "
+            f"measured depth inside the ROI is within {100 * GROUND_BAND_M:.0f} cm in front of it (the ground, a "
+            "table or the background), and registration takes it as the plant (certain object)")
+    if advice:
+        text += (". Set max z a few centimetres in front of the ground: calibration wizard page 7, "
+                 "'Load plant depth map'")
+    return text
 
 
 def fit_roi(points: np.ndarray, margin_m: float = 0.02) -> tuple[np.ndarray, np.ndarray]:

@@ -281,6 +281,8 @@ def _row_from_summary(out: Path) -> dict[str, Any]:
     except (OSError, ValueError):
         return {}
     row: dict[str, Any] = {"files": ";".join(s.get("files") or [])}
+    if s.get("warnings"):  # e.g. an ROI that takes in the ground (core/geometry/roi.py)
+        row["warnings"] = " | ".join(s["warnings"])
     for cam, cases in (s.get("cases") or {}).items():
         for entry in cases.values():
             row[f"{cam} {_short(entry.get('code'))} %"] = entry.get("percent")

@@ -225,10 +225,12 @@ class Registrar:
         with _stage(progress, self.timings, "depth rays", 0.0, 0.2):
             rays = self._camera_rays(dcam)
         self.meshes = build_meshes(self.rig, depth_m, self.params, rays, progress.sub(0.2, 1.0), self.timings)
-        from ..geometry.roi import cut_warning  # an ROI that cuts off most of the plant looks complete otherwise
+        # an ROI that cuts off most of the plant, or takes in the ground, looks complete otherwise
+        from ..geometry.roi import cut_warning, ground_warning
 
-        w = cut_warning(dcam.to_rig(rays * depth_m.reshape(-1, 1)), *self.params.roi(self.rig))
-        self.warnings = [w] if w else []
+        X_rig = dcam.to_rig(rays * depth_m.reshape(-1, 1))
+        roi = self.params.roi(self.rig)
+        self.warnings = [w for w in (cut_warning(X_rig, *roi), ground_warning(X_rig, *roi)) if w]
         if self.meshes.object.n_triangles == 0:
             raise InputError(
                 "no surface inside the region of interest: the depth map has no valid neighbouring "

@@ -73,8 +73,15 @@ class CapturePage(WizardPage):
         self.table = CaptureTable(self)
         self.table.cellDoubleClicked.connect(self._open_review)
         lay.addWidget(self.table, 1)
+        mb = QHBoxLayout()
         self.message = banner()
-        lay.addWidget(self.message)
+        mb.addWidget(self.message, 1)
+        # a wrong board size fails every image: the size that was found, one click away
+        self.use_hint_btn = QPushButton()
+        self.use_hint_btn.hide()
+        self.use_hint_btn.clicked.connect(self._use_hint)
+        mb.addWidget(self.use_hint_btn)
+        lay.addLayout(mb)
         hb = QHBoxLayout()
         self.add_btn = QPushButton("Add pose folder…")
         self.add_btn.setToolTip("Copy a folder of images named after the cameras into the session "
@@ -95,6 +102,7 @@ class CapturePage(WizardPage):
         self.model.poses_changed.connect(self.rebuild)
         self.model.detection_changed.connect(self.update_cell)
         self.model.review_changed.connect(self._update_all)
+        self.model.board_hint_changed.connect(self._summary)
         actions.busy_changed.connect(self._busy)
 
     def _busy(self, busy: bool) -> None:
@@ -210,7 +218,14 @@ class CapturePage(WizardPage):
         self.summary.setText(txt)
         low = [c for c in s.camera_names
                if sum(1 for p in s.poses if getattr(self.model.detections.get((p.name, c)), "status", None) == "found") < 3]
-        if not pending and low and s.poses:
+        hint = self.model.board_hint
+        self.use_hint_btn.setVisible(hint is not None)
+        if hint is not None:
+            self.use_hint_btn.setText(f"Use a {hint[0]} x {hint[1]} board")
+        if not pending and hint is not None:
+            set_banner(self.message, f"⚠ {self.model.board_hint_text()} Use the button to set it and detect "
+                                     "again, or set the board on page 1.", error=True)
+        elif not pending and low and s.poses:
             set_banner(self.message, f"⚠ fewer than 3 boards found for {', '.join(low)}: "
                                      "those cameras cannot be calibrated. Add poses or fix the detections (page 3).")
         elif not s.poses:
@@ -224,6 +239,15 @@ class CapturePage(WizardPage):
         key = it.data(Qt.ItemDataRole.UserRole) if it else None
         if key:
             self.actions.show_view(key[1], key[0])
+
+    def _use_hint(self) -> None:
+        if self.actions.is_busy():
+            set_banner(self.message, "⚠ wait until the running job finishes (or cancel it)", error=True)
+            return
+        if not self.model.use_board_hint():
+            set_banner(self.message, "⚠ cannot save the session's board size: set it on page 1", error=True)
+            return
+        self.actions.set_session(self.model.session)  # forgets the detections and detects again
 
     def _add(self) -> None:
         d = QFileDialog.getExistingDirectory(self, "Add a pose (folder with one image per camera)")

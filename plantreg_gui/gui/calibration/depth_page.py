@@ -74,7 +74,9 @@ class DepthPage(WizardPage):
         fill_matrix(self.table, names, results.table(rep, "depth") or {}, "depth")
         dist = results.bias_distance_mm(rep) or results.board_distance_mm(cal)
         self.bias.set_data(results.depth_bias(rep), dist)
-        self._rows, self._pairs = results.depth_views(rep)
+        self._rows, pairs = results.depth_views(rep)
+        rank = {n: i for i, n in enumerate(names)}  # the N x N table's camera order, not alphabetical
+        self._pairs = sorted(pairs, key=lambda pr: (rank.get(pr[0], len(rank)), rank.get(pr[1], len(rank))))
         origins = [o for o in names if any(pr[0] == o for pr in self._pairs)]
         cur = self.origin.currentText()
         self.origin.blockSignals(True)

@@ -41,12 +41,15 @@ class ImageView(QGraphicsView):
         self._message: QGraphicsSimpleTextItem | None = None
         self.corner_count = 0
         self._fitted = True
+        self._resid_items: list = []
+        self.residual_segments = np.zeros((0, 2, 2))  # (N, 2 ends, xy) of the drawn residual vectors
 
     # ------------------------------------------------------------------ content
     def clear(self, message: str = "") -> None:
         self.scene().clear()
         self._pixmap = None
         self._overlay = []
+        self._resid_items = []
         self.corner_count = 0
         if message:
             t = self.scene().addSimpleText(message)
@@ -60,7 +63,9 @@ class ImageView(QGraphicsView):
         """``img`` uint8 (H, W) or (H, W, 3)."""
         self.scene().clear()
         self._overlay = []
+        self._resid_items = []
         self.corner_count = 0
+        self.image = img  # what is shown (the corner review's tests look at it)
         self._pixmap = self.scene().addPixmap(qpixmap(img))
         self._pixmap.setTransformationMode(Qt.TransformationMode.SmoothTransformation)
         h, w = img.shape[:2]
@@ -114,6 +119,39 @@ class ImageView(QGraphicsView):
         br = label.boundingRect()
         label.setPos(x0 - R - br.width() - 0.2 * R, y0 - R - br.height() * 0.8)
         self._add(label)
+
+    def set_residuals(self, corners: np.ndarray | None, residuals: np.ndarray | None, scale: float) -> None:
+        """Draw each corner's residual vector (N, 2) px from its corner (N, 2), ``scale`` times
+        longer than it is (magenta, with a head); None clears them."""
+        for it in getattr(self, "_resid_items", []):
+            self.scene().removeItem(it)
+        self._resid_items: list = []
+        self.residual_segments = np.zeros((0, 2, 2))
+        if corners is None or residuals is None or len(corners) == 0:
+            return
+        a = np.asarray(corners, np.float64).reshape(-1, 2)
+        b = a + scale * np.asarray(residuals, np.float64).reshape(-1, 2)
+        self.residual_segments = np.stack([a, b], axis=1)
+        steps = np.linalg.norm(np.diff(a, axis=0), axis=1)
+        w = max(1.0, 0.05 * float(np.median(steps))) if len(steps) else 1.0
+        pen = QPen(QColor("#ff00ff"), w)
+        pen.setCapStyle(Qt.PenCapStyle.RoundCap)
+        for (x0, y0), (x1, y1) in zip(a, b):
+            path = QPainterPath(QPointF(x0, y0))
+            path.lineTo(QPointF(x1, y1))
+            d = np.array([x1 - x0, y1 - y0])
+            L = float(np.hypot(*d))
+            if L > 4 * w:  # a head where it can be seen
+                u, n = d / L, np.array([-d[1], d[0]]) / L
+                for side in (1, -1):
+                    h = np.array([x1, y1]) - u * 3 * w + side * n * 1.8 * w
+                    path.moveTo(QPointF(x1, y1))
+                    path.lineTo(QPointF(*h))
+            it = QGraphicsPathItem(path)
+            it.setPen(pen)
+            it.setZValue(5)
+            self.scene().addItem(it)
+            self._resid_items.append(it)
 
     def focus_corners(self, corners: np.ndarray, margin: float = 0.45) -> None:
         """Zoom onto the board: its corners' bounding box grown by ``margin`` of its size each side."""

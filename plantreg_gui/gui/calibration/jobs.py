@@ -25,7 +25,10 @@ def detect_job(session, options: dict | None, keys: set[Key] | None, sink: Calla
     thread keeps the GIL; detections cached in the session's ``detections.json`` are only
     thumbnailed); one image (a re-detection) goes to the long-lived calculation process, which
     is already running. An unreadable image becomes a failed detection with the reader's
-    message instead of ending the run. Returns the number of detections."""
+    message instead of ending the run. Returns ``{"detections": n, "board_hint": hint}``: when
+    a whole session was detected and a camera's chessboard was found in none of its images,
+    ``hint`` is the (columns, rows) that is found in them (the usual mistake: squares counted
+    instead of inner corners), else None."""
     progress = ensure_reporter(progress)
     todo = [(p.name, c) for p in session.poses for c in session.camera_names
             if keys is None or (p.name, c) in keys]
@@ -34,9 +37,38 @@ def detect_job(session, options: dict | None, keys: set[Key] | None, sink: Calla
     else:
         results = detect_views(session, todo, options, progress, thumbnails=THUMB_PX, processes=True,
                                unreadable="fail")
+    failed: dict[str, list] = {}
+    found: set[str] = set()
     for det, thumb in results:
         sink(det, thumb if det.status != "missing" else None)
-    return len(todo)
+        if det.status == "found":
+            found.add(det.camera)
+        elif det.status == "failed" and det.path is not None:
+            failed.setdefault(det.camera, []).append(det.path)
+    hint = None
+    if keys is None and session.board.type == "chessboard":
+        hint = _board_hint(session.board, [paths for cam, paths in failed.items() if cam not in found], progress)
+    return {"detections": len(todo), "board_hint": hint}
+
+
+def _board_hint(board, failed_paths: list[list[Path]], progress: Reporter) -> tuple[int, int] | None:
+    """The board size found in a few images of cameras that found no board (see detect_job)."""
+    from ...core.calibration import suggest_board_size
+    from ...core.errors import InputError
+    from ...core.io.imageio import read_image
+
+    for paths in failed_paths:
+        progress.check()
+        imgs = []
+        for path in paths[:3]:
+            try:
+                imgs.append(read_image(path))
+            except InputError:
+                pass
+        hint = suggest_board_size(imgs, board) if imgs else None
+        if hint:
+            return tuple(int(v) for v in hint)
+    return None
 
 
 THUMB_PX = 112

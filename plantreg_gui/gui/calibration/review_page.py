@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from collections import OrderedDict
 
-import cv2
 import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QColor, QKeySequence, QPainter, QPen, QShortcut
@@ -12,61 +11,14 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QFormLayout, QGroupBox, QHB
                                QListWidget, QListWidgetItem, QPushButton, QSizePolicy, QSplitter,
                                QVBoxLayout, QWidget)
 
+from ..workers import Jobs
+from ...core.calibration.coverage import coverage_image, coverage_map, empty_regions
 from .page import WizardPage
 from .image_view import ImageView
 from .widgets import banner, qpixmap, set_banner, to_display
 
 STATUS_MARK = {"found": "✔", "failed": "✖", "missing": "—", None: "…"}
 REJECTED_MARK = "⊘"
-
-
-def coverage_map(detections, camera: str, excluded: set, max_side: int = 240) -> tuple[np.ndarray, tuple[int, int]] | None:
-    """Count per (downscaled) pixel of how many used board views of ``camera`` cover it.
-
-    Returns ``(counts (h, w) int32, (W, H) image size)`` or None without any found board. The
-    board area of a view is the convex hull of its detected corners.
-    """
-    dets = [d for (p, c), d in detections.items()
-            if c == camera and d.status == "found" and d.corners is not None and (p, c) not in excluded]
-    if not dets:
-        return None
-    W, H = dets[0].image_size
-    s = max_side / max(W, H)
-    w, h = max(1, round(W * s)), max(1, round(H * s))
-    acc = np.zeros((h, w), np.int32)
-    for d in dets:
-        hull = cv2.convexHull(np.asarray(d.corners, np.float32).reshape(-1, 1, 2) * s)
-        m = np.zeros((h, w), np.uint8)
-        cv2.fillConvexPoly(m, np.round(hull).astype(np.int32), 1)
-        acc += m
-    return acc, (W, H)
-
-
-def coverage_image(acc: np.ndarray) -> np.ndarray:
-    """Heat map RGB (h, w, 3): never-covered regions striped dark red, covered ones viridis."""
-    top = max(int(acc.max()), 1)
-    norm = (np.clip(acc / top, 0, 1) * 255).astype(np.uint8)
-    rgb = cv2.cvtColor(cv2.applyColorMap(norm, cv2.COLORMAP_VIRIDIS), cv2.COLOR_BGR2RGB)
-    yy, xx = np.mgrid[0:acc.shape[0], 0:acc.shape[1]]
-    stripes = ((xx + yy) // 6) % 2 == 0
-    empty = acc == 0
-    rgb[empty & stripes] = (150, 30, 30)
-    rgb[empty & ~stripes] = (90, 20, 20)
-    return rgb
-
-
-def empty_regions(acc: np.ndarray) -> list[str]:
-    """Names of the 3 x 3 image regions less than a quarter covered."""
-    h, w = acc.shape
-    names = [["top-left", "top", "top-right"], ["left", "centre", "right"],
-             ["bottom-left", "bottom", "bottom-right"]]
-    out = []
-    for i in range(3):
-        for j in range(3):
-            cell = acc[i * h // 3:(i + 1) * h // 3, j * w // 3:(j + 1) * w // 3]
-            if cell.size and (cell > 0).mean() < 0.25:
-                out.append(names[i][j])
-    return out
 
 
 class ReviewPage(WizardPage):
@@ -108,7 +60,21 @@ class ReviewPage(WizardPage):
         legend.setWordWrap(True)
         legend.setStyleSheet("color: #444444;")
         ml.addWidget(legend)
+        # once calibrated: residual vectors (scale stated) and the image undistorted by the model
+        rb = QHBoxLayout()
+        self.undistort = QCheckBox("Show undistorted")
+        self.undistort.setToolTip("The image and its corners undistorted with this camera's calibrated lens model "
+                                  "(cv2.undistort, same camera matrix): the board's edges must come out straight")
+        self.undistort.toggled.connect(self.model.set_review_undistorted)
+        rb.addWidget(self.undistort)
+        self.resid_legend = QLabel()
+        self.resid_legend.setWordWrap(True)
+        self.resid_legend.setStyleSheet("color: #444444;")
+        rb.addWidget(self.resid_legend, 1)
+        ml.addLayout(rb)
         split.addWidget(mid)
+        self._undistorted: OrderedDict = OrderedDict()  # (key, K bytes) -> undistorted display image
+        self.jobs = Jobs(self)  # cv2.undistort off the GUI thread
 
         # --- controls + coverage
         right = QWidget()
@@ -177,7 +143,10 @@ class ReviewPage(WizardPage):
         self.model.session_changed.connect(self._session)
         self.model.detection_changed.connect(self._detection)
         self.model.review_changed.connect(self._review)
+        self.model.board_hint_changed.connect(self._show_controls)
         self.model.calibration_changed.connect(self._relabel)
+        self.model.calibration_changed.connect(self._calibration)
+        self.model.review_display_changed.connect(self._show)
         self.model.view_selected.connect(lambda key: self.select(key[1], key[0]))
         self.model.poses_changed.connect(self._fill_list)
         actions.busy_changed.connect(self._busy)
@@ -325,11 +294,7 @@ class ReviewPage(WizardPage):
         if img is None:
             self.view.clear(f"{key[0]} / {key[1]}: no image" if d is None or not d.reason else d.reason)
         else:
-            self.view.set_image(img)
-            if d is not None and d.status == "found":
-                self.view.set_corners(d.corners, s.board.columns, getattr(d, "ids", None)
-                                      if s.board.type == "charuco" else None)
-                self.view.focus_corners(d.corners)
+            self._show_image(key, img, d)
         st = getattr(d, "status", None)
         cap = f"<b>{key[0]} · {key[1]}</b> ({s.cameras.get(key[1], '')}) — "
         if d is None:
@@ -343,6 +308,85 @@ class ReviewPage(WizardPage):
             cap += f"{st}: {d.reason}"
         self.caption.setText(cap)
         self._show_controls()
+
+    def _calibrated(self, camera: str):
+        """The camera's calibrated intrinsics (CameraCalibration), None before calibration."""
+        cal = self.model.calibration
+        return cal.intrinsics.get(camera) if cal is not None and self.model.calibration_ready() else None
+
+    def _show_image(self, key, img: np.ndarray, d) -> None:
+        """The image (undistorted when chosen and ready), its corners in order and, once the
+        camera is calibrated, each corner's residual vector with the scale it is drawn at."""
+        from ...core.calibration.residuals import drawing_scale, undistort_points, view_residuals
+
+        s = self.model.session
+        cc = self._calibrated(key[1])
+        self.undistort.setEnabled(cc is not None)
+        und = None
+        if cc is not None and self.model.review_undistorted:
+            und = self._undistorted.get((key, cc.K.tobytes() + cc.dist.tobytes()))
+            if und is None:
+                self._start_undistort(key, img, cc)
+        self.view.set_image(img if und is None else und)
+        self.shown_undistorted = und is not None
+        found = d is not None and d.status == "found" and d.corners is not None
+        corners = None
+        if found:
+            corners = d.corners if und is None else undistort_points(d.corners, cc.K, cc.dist)
+            self.view.set_corners(corners, s.board.columns, getattr(d, "ids", None) if s.board.type == "charuco" else None)
+            self.view.focus_corners(corners)
+        res = view_residuals(self.model.calibration, d, s.board) if found and cc is not None else None
+        if res is None:
+            self.view.set_residuals(None, None, 1.0)
+            self.resid_legend.setText("Residual vectors and the undistorted view: once the camera is calibrated (page 4)."
+                                      if cc is None else "")
+            self.residual_scale = None
+            return
+        c, r = res
+        if und is not None:  # the same vectors in the undistorted image
+            r = undistort_points(c + r, cc.K, cc.dist) - corners
+            c = corners
+        steps = np.linalg.norm(np.diff(c, axis=0), axis=1)
+        scale = drawing_scale(r, float(np.median(steps)) if len(steps) else 10.0)
+        self.view.set_residuals(c, r, scale)
+        self.residual_scale = scale
+        n = np.linalg.norm(r, axis=1)
+        wait = " Undistorting…" if cc is not None and self.model.review_undistorted and und is None else ""
+        self.resid_legend.setText(f"<span style='color:#c000c0'><b>Magenta</b></span>: residual vectors (reprojected − "
+                                  f"detected corner) drawn <b>×{scale:g}</b> (1 px of error = {scale:g} px on the "
+                                  f"image); mean {n.mean():.3f} px, max {n.max():.3f} px.{wait}")
+
+    def _start_undistort(self, key, img: np.ndarray, cc) -> None:
+        from ...core.calibration.residuals import undistort_image
+        from ..workers import Worker
+
+        tag = (key, cc.K.tobytes() + cc.dist.tobytes())
+        if any(getattr(w, "tag", None) == tag for w in self.jobs):
+            return
+        for w in self.jobs:
+            w.supersede()  # another image's: its result is dropped
+        w = Worker(undistort_image, img, cc.K, cc.dist, parent=self)
+        w.tag = tag
+        self.jobs.start(w, "Undistorting the image", lambda out, t=tag: self._undistorted_done(t, out),
+                        on_end=lambda w: w.deleteLater(), background=True)
+
+    def _undistorted_done(self, tag, out: np.ndarray) -> None:
+        self._undistorted[tag] = out
+        while len(self._undistorted) > 6:
+            self._undistorted.popitem(last=False)
+        if self.current == tag[0] and self.model.review_undistorted:
+            self._show()
+
+    def undistort_busy(self) -> bool:
+        return bool(self.jobs)
+
+    def shutdown(self) -> None:
+        self.jobs.wait_all()
+
+    def _calibration(self) -> None:
+        self._undistorted.clear()
+        if self.current is not None and self.isVisible():
+            self._show()
 
     def _show_controls(self) -> None:
         key = self.current
@@ -359,8 +403,13 @@ class ReviewPage(WizardPage):
         self.enhance.setChecked(bool(getattr(opts, "enhance", False)))
         self.redetect_btn.setEnabled(not self.actions.is_busy() and key[1] in self.model.session.pose(key[0]).images)
         if d is not None and d.status == "failed":
-            set_banner(self.info, f"Detection failed: {d.reason}. For a thermal image try the inverted polarity "
-                                  "and contrast enhancement, then Re-detect.")
+            if self.model.board_hint is not None:  # every image fails alike: the size, not the image
+                advice = f"{self.model.board_hint_text()} Set it on page 1 (or with the button on page 2)."
+            elif self.model.session.cameras.get(key[1]) == "thermal":
+                advice = "For a thermal image try the inverted polarity and contrast enhancement, then Re-detect."
+            else:
+                advice = "Try contrast enhancement for a faint or unevenly lit board, then Re-detect."
+            set_banner(self.info, f"Detection failed: {d.reason}. {advice}")
         elif key in self.model.excluded:
             set_banner(self.info, "Rejected: this view is not used in the calibration.")
         else:

@@ -260,6 +260,8 @@ class SavePage(WizardPage):
             self.pose.addItem(f"plant: {path.parent.name}/{path.name}", ("plant", key))
             i = self.pose.count() - 1
         self.pose.setCurrentIndex(i)
+        if self.message.text().startswith("Not saved: load a plant depth map"):
+            set_banner(self.message, "")  # done
         if self.fit_roi():
             set_banner(self.roi_msg, f"ROI fitted to the plant depth map {path.name}: check it below, then save.")
         return True
@@ -289,11 +291,11 @@ class SavePage(WizardPage):
         self._depth_cache[key] = d
         return d
 
-    def points(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """Rig-frame points (h, w, 3) of the selected depth map and its depth (h, w), on a grid of
-        every ``step``-th pixel (see PREVIEW_SIDE)."""
+    def points(self, src: tuple[str, str] | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+        """Rig-frame points (h, w, 3) of the selected depth map (or of ``src``) and its depth
+        (h, w), on a grid of every ``step``-th pixel (see PREVIEW_SIDE)."""
         cal, s = self.model.calibration, self.model.session
-        src = self.source()
+        src = self.source() if src is None else src
         if cal is None or s is None or src is None or cal.rig.depth_camera is None:
             return None
         d = self._depth_m(src)
@@ -405,24 +407,60 @@ class SavePage(WizardPage):
         p.end()
 
     def _roi_banner(self, X: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
-        """Say what the ROI does to a plant's depth map; ask for one while none is loaded."""
-        from ...core.geometry.roi import CUT_WARN_FRACTION, cut_fraction
+        """Say what the ROI does to the shown depth map (cuts the plant, takes in the ground);
+        ask for a plant's depth map while none is loaded."""
+        from ...core.geometry.roi import CUT_WARN_FRACTION, cut_fraction, ground_warning
 
         if not np.all(lo < hi):
             return
         src = self.source()
-        plants = [self.pose.itemData(i) for i in range(self.pose.count()) if self.pose.itemData(i)[0] == "plant"]
+        msgs = []
         if src is not None and src[0] == "plant":
             frac, n = cut_fraction(X, lo, hi)  # the same test as registration's warning
             if n >= 100 and frac > CUT_WARN_FRACTION:
-                set_banner(self.roi_msg, f"⚠ The ROI leaves out {100 * frac:.0f} % of the plant's top (the nearest depth mid-view): "
-                                         "the registration would keep only part of the plant. 'Fit ROI to the "
-                                         "plant' or widen it.", error=True)
-            elif "⚠" in self.roi_msg.text():
-                set_banner(self.roi_msg, "")
-        elif not plants:
-            set_banner(self.roi_msg, "Set the ROI from a plant: 'Load plant depth map…' (a recording of a plant "
-                                     "with this rig). The board poses only show where the board was.")
+                msgs.append(f"⚠ The ROI leaves out {100 * frac:.0f} % of the plant's top (the nearest depth mid-view): "
+                            "the registration would keep only part of the plant. 'Fit ROI to the plant' or widen it.")
+        if src is not None:
+            g = ground_warning(X, lo, hi, advice=False)  # the same test as registration's warning
+            if g:
+                msgs.append(f"⚠ In this depth map, {g}. Lower max z to a few centimetres in front of the ground.")
+        if not self.plant_loaded():
+            msgs.append("Set the ROI from a plant: 'Load plant depth map…' (a recording of a plant "
+                        "with this rig). The board poses only show where the board was.")
+        if msgs:
+            set_banner(self.roi_msg, " ".join(msgs), error=any(m.startswith("⚠") for m in msgs))
+        elif "⚠" in self.roi_msg.text() or self.roi_msg.text().startswith("Set the ROI from a plant"):
+            set_banner(self.roi_msg, "")  # what it said no longer holds; "ROI fitted to ..." stays
+
+    def plant_loaded(self) -> bool:
+        """Whether a plant's depth map has been loaded (the only thing that can check an ROI)."""
+        return any(self.pose.itemData(i)[0] == "plant" for i in range(self.pose.count()))
+
+    def roi_question(self, lo: np.ndarray, hi: np.ndarray) -> str | None:
+        """Why saving the ROI ``lo``, ``hi`` (3,) needs a confirmation, in words: no plant's depth
+        map checked it, or a loaded plant's depth map shows it cutting the plant or taking in the
+        ground (the tests registration warns with). None: nothing to ask (or no depth camera)."""
+        from ...core.geometry.roi import cut_warning, ground_warning
+
+        s = self.model.session
+        if s is None or s.depth_camera is None:
+            return None
+        box = (f"    x {lo[0]:.2f} … {hi[0]:.2f} m,  y {lo[1]:.2f} … {hi[1]:.2f} m,  z {lo[2]:.2f} … {hi[2]:.2f} m "
+               f"(ground plane at z = {hi[2]:.2f} m)")
+        if not self.plant_loaded():
+            return ("No plant depth map was loaded, so this region of interest was not checked against a plant:\n"
+                    f"{box}\nRegistration takes everything measured inside it as the plant: with the ground plane "
+                    "in or behind the ground, table or background, that surface is registered as plant.")
+        found = []
+        for i in range(self.pose.count()):
+            src = self.pose.itemData(i)
+            res = self.points(tuple(src)) if src[0] == "plant" else None
+            if res is not None:
+                found += [f"{Path(src[1]).name}: {w}" for w in (cut_warning(res[0], lo, hi, advice=False),
+                                                                ground_warning(res[0], lo, hi, advice=False)) if w]
+        if not found:
+            return None
+        return "This region of interest does not fit the plant's depth map:\n" + box + "\n\n" + "\n".join(found)
 
     def fit_roi(self) -> bool:
         """Fit the ROI to the shown plant depth map (core.roi.fit_roi); False for a board pose."""
@@ -472,6 +510,21 @@ class SavePage(WizardPage):
             set_banner(self.message, "⚠ choose a rig file", error=True)
             return
         set_banner(self.message, "")
+        question = self.roi_question(lo, hi)
+        if question is not None:  # an ROI nobody checked against a plant takes in the ground unseen
+            box = QMessageBox(QMessageBox.Icon.Warning, "Check the region of interest", question,
+                              QMessageBox.StandardButton.NoButton, self)
+            load = box.addButton("Load plant depth map…", QMessageBox.ButtonRole.AcceptRole)
+            keep = box.addButton("Save this ROI anyway", QMessageBox.ButtonRole.DestructiveRole)
+            box.addButton("Cancel", QMessageBox.ButtonRole.RejectRole)
+            box.setDefaultButton(load)
+            box.exec()
+            if box.clickedButton() is load:
+                self._browse_plant()
+                return
+            if box.clickedButton() is not keep:
+                set_banner(self.message, "Not saved: load a plant depth map to set the ROI, or save again.")
+                return
         rep = self.report_path.text().strip()
         rig_path, rep_path = Path(self.rig_path.text().strip()), (Path(rep) if rep else None)
         # a rig file is a calibration someone may still use: never replace one silently

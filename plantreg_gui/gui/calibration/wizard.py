@@ -195,6 +195,8 @@ class CalibrationWizard(QWidget):
             self._worker = None
         self._set_busy(False)
         for p in self.pages:
+            if hasattr(p, "shutdown"):
+                p.shutdown()
             v = getattr(p, "view3d", None)
             if v is not None:
                 v.close_plotter()
@@ -309,7 +311,8 @@ class CalibrationWizard(QWidget):
             relay.detection.emit(session, det, thumb)
 
         self._start("Detecting corners", jobs.detect_job,
-                    (session, dict(options), None if keys is None else set(keys), sink), None,
+                    (session, dict(options), None if keys is None else set(keys), sink),
+                    lambda r: self.model.set_board_hint(r["board_hint"]) if keys is None else None,
                     session=session, step="detect")
 
     def _start(self, title: str, fn: Callable, args: tuple, on_result: Callable[[Any], None] | None,

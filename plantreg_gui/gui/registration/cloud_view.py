@@ -45,6 +45,9 @@ class CloudView(QWidget):
         top = QHBoxLayout()
         top.addWidget(QLabel("Colour by"))
         top.addWidget(self.colour)
+        self.point_size.setSuffix(" px")
+        self.point_size.setToolTip("drawn size of the points on the screen (pixels); positions and distances "
+                                   "in the read-out are in millimetres")
         top.addWidget(QLabel("Point size"))
         top.addWidget(self.point_size)
         for name in MESH_COLOURS:
@@ -332,8 +335,8 @@ class CloudView(QWidget):
 
             self._tree = cKDTree(self.cloud.points)
         _, i = self._tree.query(np.asarray(xyz, dtype=np.float64).reshape(3))
-        self.picked_index = int(i)
-        self.info.setText(self.cloud.point_text(int(i)))
+        previous, self.picked_index = self.picked_index, int(i)
+        self.info.setText(self.cloud.point_text(int(i), previous))  # with the distance to the last pick
         return int(i)
 
     def show_point(self, i: int) -> None:

@@ -70,6 +70,16 @@ class Legend(QTableWidget):
         h = self.horizontalHeader().height() + sum(self.rowHeight(i) for i in range(self.rowCount())) + 4
         self.setFixedHeight(h)
 
+    def set_swatches(self, shown: dict[int, tuple[int, int, int]], opacity: float) -> None:
+        """Swatches in the colour each code shows as on the map (``shown``; codes absent keep theirs)."""
+        self.blockSignals(True)
+        for i, code in enumerate(self.codes):
+            it = self.item(i, 0)
+            if it is not None and code in shown:
+                it.setData(Qt.ItemDataRole.DecorationRole, QColor(*shown[code]))
+                it.setToolTip(f"the colour as it shows on the map ({100 * opacity:.0f} % over the image)")
+        self.blockSignals(False)
+
     def enabled_codes(self) -> set[int]:
         return {c for i, c in enumerate(self.codes)
                 if self.item(i, 0) is not None and self.item(i, 0).checkState() == Qt.CheckState.Checked}
@@ -244,6 +254,10 @@ class MasksView(QWidget):
         if self.show_cases.isChecked() and src in self.cases:
             on = self.case_legend.enabled_codes()
             out = display.overlay(out, self.cases[src], {c: v for c, v in display.CASE_COLOURS.items() if c in on}, op)
+            self.case_legend.set_swatches(display.shown_colours(out, self.cases[src], on & set(display.CASE_COLOURS)), op)
+        if self.show_areas.isChecked() and self.area is not None:
+            on = self.area_legend.enabled_codes()
+            self.area_legend.set_swatches(display.shown_colours(out, self.area, on & set(display.AREA_COLOURS)), op)
         for name, (cb, mask) in self.extra.items():
             if cb.isChecked() and mask.shape == out.shape[:2]:
                 out = display.overlay(out, mask.astype(np.uint8), {1: EXTRA_COLOURS.get(name, (255, 0, 0))}, op)
