@@ -13,6 +13,7 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QFormLayout, QGroupBox, QHB
 
 from ..workers import Jobs
 from ...core.calibration.coverage import coverage_image, coverage_map, empty_regions
+from ...core.camera.modality import inverted_board
 from .page import WizardPage
 from .image_view import ImageView
 from .widgets import banner, qpixmap, set_banner, to_display
@@ -405,7 +406,7 @@ class ReviewPage(WizardPage):
         if d is not None and d.status == "failed":
             if self.model.board_hint is not None:  # every image fails alike: the size, not the image
                 advice = f"{self.model.board_hint_text()} Set it on page 1 (or with the button on page 2)."
-            elif self.model.session.cameras.get(key[1]) == "thermal":
+            elif inverted_board(self.model.session.cameras.get(key[1])):  # a heated board: thermal cameras
                 advice = "For a thermal image try the inverted polarity and contrast enhancement, then Re-detect."
             else:
                 advice = "Try contrast enhancement for a faint or unevenly lit board, then Re-detect."
