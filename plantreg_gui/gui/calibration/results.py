@@ -200,7 +200,7 @@ def uncertainty_maps(cal) -> list[dict[str, Any]]:
         lo, hi = u.band_m
         where = (f"add views: {', '.join(u.add_views)}" if u.needs_views
                  else f"within the limits; least certain: {', '.join(u.add_views)}")
-        title = (f"{name}: σ median {med:.2f}, worst {worst:.2f} px (limit {lim:.2f}) at {lo:.2f}-{hi:.2f} m\n{where}")
+        title = f"{name}: σ median {med:.2f}, worst {worst:.2f} px (limit {lim:.2f})\nat {lo:.2f}-{hi:.2f} m: {where}"
         out.append({"camera": name, "sigma": u.judged, "corners": u.corners, "limit": lim,
                     "needs_views": u.needs_views,
                     "aspect": u.width / max(u.height, 1), "title": title})
