@@ -101,8 +101,9 @@ def _bad_manifest(root, rig, rec):
 
 
 def _binary_manifest(root, rig, rec):
+    # starts like UTF-16 (a byte-order mark), which JSON files may be: read so, it is not JSON
     (rec / "recording.json").write_bytes(b"\xff\xfe\x00 not text")
-    return rig, rec, "ir", rec / "recording.json", ["cannot read"]
+    return rig, rec, "ir", rec / "recording.json", ["not valid JSON"]
 
 
 def _image_is_a_folder(root, rig, rec):
