@@ -21,10 +21,12 @@ model choice guards against that), a wrong board size, corners that are biased (
 board), cameras that moved between poses, or views that are not simultaneous. A low reprojection
 error says nothing about whether the data determine the model; this does.
 
-**Limits** (``plantreg calibrate`` refuses beyond them unless ``--accept-uncertain``): a
-camera's lens-model projection uncertainty, its median over the image
-(``MAX_PROJECTION_SIGMA_MEDIAN``: px, or a fraction of the image diagonal for large images) and its
-worst where the camera saw board corners (``MAX_PROJECTION_SIGMA_COVERED``); a camera's pose relative to the reference
+**Limits** (``plantreg calibrate`` refuses beyond them unless ``--accept-uncertain``): board
+views whose planes all lie within ``MIN_PLANE_SPREAD_DEG`` of one another (Zhang's degenerate
+case); a camera's projection uncertainty as mrcal figures it (the point fixed among the board
+poses), the worst over the working band ``LIMIT_BAND`` (0.8-1.25x the boards' distance), its median
+over the image (``MAX_PROJECTION_SIGMA_MEDIAN``: px, or a fraction of the image diagonal for large
+images) and its worst where the camera saw board corners (``MAX_PROJECTION_SIGMA_COVERED``); a camera's pose relative to the reference
 by its projection of points fixed in the reference camera's frame (the ``rig`` figure, median,
 ``MAX_PROJECTION_SIGMA_MEDIAN``: a rotation traded against the camera's principal point moves
 nothing there) and its translation (``MAX_TRANSLATION_SIGMA_MM``).
