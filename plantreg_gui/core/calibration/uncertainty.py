@@ -98,9 +98,6 @@ class CameraUncertainty:
     #: (H, W) px: the figure the limits judge: the worst of ``sigma_boards_at`` (mrcal's figure
     #: over the working band) or, without board poses, ``sigma_intrinsics``
     sigma_judged: np.ndarray | None = None
-    #: whether a limit is exceeded somewhere ``add_views`` names (else it names only where the
-    #: uncertainty is highest, within the limits)
-    needs_views: bool = False
     #: the largest angle between two used views' board planes, deg (:func:`plane_spread_deg`)
     plane_spread_deg: float | None = None
 
@@ -125,6 +122,13 @@ class CameraUncertainty:
         """Worst judged projection uncertainty (px) over the grid cells some board view covered."""
         m = self.corners > 0
         return float(np.max(self.judged[m])) if m.any() else float("inf")
+
+    @property
+    def needs_views(self) -> bool:
+        """Whether a projection limit is exceeded (``add_views`` then says where to add views;
+        else it names only where the uncertainty is highest, within the limits)."""
+        lim_med, lim_seen = limits_px(self)
+        return bool(self.summary()[0] > lim_med or self.covered_worst > lim_seen)
 
     @property
     def diagonal(self) -> float:
@@ -224,15 +228,18 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
     # them: d Z / d w = -[Z - t]x, d Z / d t = I
     Jr = np.concatenate([Ji, -dq_dZ @ _skew(X_cam - t_cam_rig), dq_dZ], axis=2)
     sig_r = _worst_direction(np.einsum("nij,jk,nlk->nil", Jr, cov, Jr)).reshape(len(gv), len(gu))
+
+    def among_boards(f: float) -> np.ndarray:
+        """(H, W) px: mrcal's figure for the grid's points at ``f`` x the working distance."""
+        Xf = X_cam * f
+        _q, dq_dZf, Jif = project_jac(Xf, K, dist)
+        Jrf = np.concatenate([Jif, -dq_dZf @ _skew(Xf - t_cam_rig), dq_dZf], axis=2)
+        return sigma_among_boards(Jrf, dq_dZf, (Xf - t_cam_rig) @ R_cam_rig, R_cam_rig, cov,
+                                  *boards).reshape(len(gv), len(gu))
+
     sig_b = None
-    boards_at: dict[float, np.ndarray] = {}
-    if boards is not None:
-        for f in LIMIT_BAND:
-            Xf = X_cam * f
-            _q, dq_dZf, Jif = project_jac(Xf, K, dist)
-            Jrf = np.concatenate([Jif, -dq_dZf @ _skew(Xf - t_cam_rig), dq_dZf], axis=2)
-            boards_at[f] = sigma_among_boards(Jrf, dq_dZf, (Xf - t_cam_rig) @ R_cam_rig, R_cam_rig, cov,
-                                              *boards).reshape(len(gv), len(gu))
+    boards_at = {f: among_boards(f) for f in LIMIT_BAND} if boards is not None else {}
+    if boards_at:
         sig_b = boards_at[1.0]
     judged = np.max(np.stack(list(boards_at.values())), axis=0) if boards_at else sig_i
     # standard errors
@@ -272,15 +279,8 @@ def projection_uncertainty(name: str, K: np.ndarray, dist: np.ndarray, R_cam_rig
     out.sigma_boards = sig_b
     out.sigma_boards_at = boards_at
     out.sigma_judged = judged if boards_at else None
-    lim_med, lim_seen = limits_px(out)
-    out.needs_views = bool(out.summary()[0] > lim_med or out.covered_worst > lim_seen)
     if boards is not None:
-        for f in BOARDS_DISTANCE_FACTORS:
-            Xf = np.c_[xy, np.ones(len(xy))] * distance_m * f
-            _q, dq_dZf, Jif = project_jac(Xf, K, dist)
-            Jrf = np.concatenate([Jif, -dq_dZf @ _skew(Xf - t_cam_rig), dq_dZf], axis=2)
-            out.boards_by_distance[f] = float(np.median(
-                sigma_among_boards(Jrf, dq_dZf, (Xf - t_cam_rig) @ R_cam_rig, R_cam_rig, cov, *boards)))
+        out.boards_by_distance = {f: float(np.median(among_boards(f))) for f in BOARDS_DISTANCE_FACTORS}
     return out
 
 
