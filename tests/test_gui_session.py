@@ -62,6 +62,29 @@ def test_session_events_and_readout(demo_registered):
     assert not s.apply_registered(reg, s.generation - 1)
 
 
+@pytest.mark.parametrize("reopen", ["recording", "rig", "close"])
+def test_opening_other_data_clears_the_readout(demo_registered, reopen):
+    """Technician pass 3: a registered plant's read-out (values, case, spectrum) stayed in the
+    status line after another recording was opened, as if it were the new plant's."""
+    from plantreg_gui.models.registration import RegistrationSession
+
+    s = RegistrationSession()
+    loaded, reg = workspace_session_outputs(demo_registered)
+    s.apply_loaded(loaded)
+    s.apply_registered(reg, s.generation)
+    assert s.cursor is not None and "case:" in s.readout
+    seen = []
+    s.events.cursor.connect(lambda: seen.append((s.cursor, s.readout, s.spectrum)))
+    if reopen == "recording":
+        s.apply_loaded(workspace_session_outputs(demo_registered)[0])
+    elif reopen == "rig":
+        s.set_rig(loaded["rig"], Path("other.rig.json"))
+    else:
+        s.close()
+    assert s.result is None and (s.cursor, s.readout, s.spectrum) == (None, "", None)
+    assert seen and seen[-1] == (None, "", None)  # the views hear of it
+
+
 def test_display_settings_rerender_every_place(demo_registered):
     from plantreg_gui.core.display import display
     from plantreg_gui.models.layers import DisplaySettings

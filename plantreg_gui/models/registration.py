@@ -492,6 +492,7 @@ class RegistrationSession:
         self.rig, self.rig_path = rig, path
         self.plant = None
         self.forget_registration()
+        self.forget_cursor()
         if self.recording is not None:
             self.raw = raw_layers(rig, self.recording)
             self.raw_renders = {L.name: render(L.data, L.modality, self.settings_for(L.name)) for L in self.raw}
@@ -504,7 +505,8 @@ class RegistrationSession:
         self.is_demo = False
         self.pending_target = None
         self.forget_registration()
-        self.raw, self.raw_renders, self.cursor, self.readout = [], {}, None, ""
+        self.raw, self.raw_renders = [], {}
+        self.forget_cursor()
         self.events.raw.emit()
         self.events.source.emit()
 
@@ -519,7 +521,7 @@ class RegistrationSession:
         self.is_demo = bool(out.get("demo"))
         self.forget_registration()
         self.raw, self.raw_renders = out["layers"], out["renders"]
-        self.cursor = None
+        self.forget_cursor()  # the read-out was of the data just replaced
         self.events.raw.emit()
         self.events.source.emit()
 
@@ -532,10 +534,17 @@ class RegistrationSession:
         self.raw, self.raw_renders = out["layers"], out["renders"]
         self.cloud = out["cloud"]
         self.pending_target = None
-        self.cursor = None
+        self.forget_cursor()
         self.events.raw.emit()
         self.events.result.emit()  # the 3D view shows the plant's own cloud
         self.events.source.emit()
+
+    def forget_cursor(self) -> None:
+        """No cursor, read-out or spectrum: what they said belongs to data no longer open."""
+        had = self.cursor is not None or self.readout or self.spectrum is not None
+        self.cursor, self.readout, self.spectrum = None, "", None
+        if had:
+            self.events.cursor.emit()
 
     def forget_registration(self) -> None:
         self.generation += 1  # results of registrations still running belong to the old data

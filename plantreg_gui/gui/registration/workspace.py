@@ -331,6 +331,8 @@ class RegistrationWorkspace(QWidget):
         self.readout.setToolTip(s.readout)
         if s.spectrum is not None:
             self.spectrum.set_spectrum(*s.spectrum)
+        elif s.cursor is None:  # other data opened: the last spectrum was of the old data
+            self.spectrum.set_spectrum(None, None, "")
 
     # ------------------------------------------------------------------ contract for main_window
     def is_busy(self) -> bool:
