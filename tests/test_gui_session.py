@@ -471,3 +471,32 @@ def test_wizard_review_choices_leave_a_read_only_session_folder_untouched(tmp_pa
     m.set_excluded_many({("pose_01", "rgb")}, True)
     review = Session.load(folder).review
     assert review["wizard_page"] == 4 and review["excluded"] == ["pose_01:rgb"]
+
+
+def test_a_region_is_not_carried_onto_another_target(demo_registered):
+    """Technician pass 3: a region drawn on the registration into ir was kept, in pixels, when
+    registering into thermal (another camera's grid): its statistics described another part of
+    the plant. A new result on the same grid (other parameters) keeps the region."""
+    import dataclasses
+
+    from plantreg_gui.models.registration import RegistrationSession, mask_of
+
+    s = RegistrationSession()
+    loaded, reg = workspace_session_outputs(demo_registered)
+    s.apply_loaded(loaded)
+    s.apply_registered(reg, s.generation)
+    h, w = s.result.shape
+    s.set_region("rect", (w * 0.3, h * 0.3, w * 0.5, h * 0.5))
+    assert s.region_stats is not None and s.region_stats.pixels == mask_of(s.result.shape, s.region).sum()
+    again = dict(workspace_session_outputs(demo_registered)[1])
+    s.apply_registered(again, s.generation)  # same target and size: kept, statistics anew
+    assert s.region is not None and s.region_stats is not None and not s.region_note
+    other = dict(workspace_session_outputs(demo_registered)[1])
+    other["result"] = dataclasses.replace(other["result"], target="thermal")
+    seen = []
+    s.events.region.connect(lambda: seen.append(s.region_note))
+    s.apply_registered(other, s.generation)
+    assert s.region is None and s.region_stats is None
+    assert "drawn on ir" in s.region_note and "thermal" in s.region_note and seen[-1] == s.region_note
+    s.set_region("rect", (1, 1, 5, 5))  # a region drawn on the new grid belongs to it
+    assert s.region_grid == ("thermal", (h, w)) and not s.region_note

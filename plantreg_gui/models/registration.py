@@ -425,6 +425,8 @@ class RegistrationSession:
     region: tuple[str, Any] | None = None    # ("rect", (x0, y0, x1, y1)) or ("polygon", [(x, y), ...]), target px
     region_stats: Any = None                  # core.region.RegionStats of the masks source over the region
     region_token: int = 0                     # which region/source the statistics being computed belong to
+    region_grid: tuple[str, tuple[int, int]] | None = None   # (target, (H, W)) the region was drawn on
+    region_note: str = ""                     # why the last region was cleared ('' = it was not)
     stats_runner: Callable[[tuple, int], None] | None = field(default=None, repr=False)  # see _region_changed
     generation: int = 0
     events: SessionEvents = field(default_factory=SessionEvents, repr=False)
@@ -570,8 +572,16 @@ class RegistrationSession:
             self.masks_source = out["worst"] if "worst" in out else worst_source(self.result.cases)
         self.events.result.emit()
         self.events.masks_source.emit()
-        if self.region is not None:  # a new result (other parameters): the same region's new statistics
-            self._region_changed()
+        if self.region is not None:
+            grid = (self.result.target, tuple(self.result.shape))
+            if self.region_grid != grid:  # its pixels are another camera's: they mean another place
+                was = self.region_grid
+                self.set_region(None)
+                self.region_note = (f"The region drawn on {was[0]} ({was[1][1]}x{was[1][0]}) was cleared: "
+                                    f"{grid[0]} is another pixel grid. Draw it again or load a region.")
+                self.events.region.emit()
+            else:  # a new result (other parameters): the same region's new statistics
+                self._region_changed()
         if centre is not None:  # start with the cursor on the object so every read-out has a value
             self.hover("target", *centre)
         return True
@@ -621,6 +631,9 @@ class RegistrationSession:
         if new is None and self.region is None:
             return
         self.region = new
+        self.region_note = ""
+        r = self.result
+        self.region_grid = None if new is None or r is None else (r.target, tuple(r.shape))
         self._region_changed()
 
     def _camera_info(self, name: str) -> tuple[Any, str]:

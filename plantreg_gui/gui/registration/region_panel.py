@@ -115,7 +115,7 @@ class RegionPanel(QGroupBox):
         self.clear_button.setEnabled(s.region is not None)
         if st is None:
             self.text.setText("" if s.result is None else "Computing the statistics…" if s.region is not None else
-                              "Choose Rectangle or Polygon and draw on a registered image: the chosen source's "
+                              (s.region_note + " " if s.region_note else "") + "Choose Rectangle or Polygon and draw on a registered image: the chosen source's "
                               "cases and values over the region appear here.")
             self.spectrum.hide()
             return
