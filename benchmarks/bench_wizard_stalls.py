@@ -100,7 +100,8 @@ def _step(app, name: str, action, cond, trace: bool, rows: list) -> None:
             dog.stop()
     wall = time.perf_counter() - t0
     rows.append((name, probe.max_gap * 1000, len(probe.stalls(0.2)), wall))
-    print(f"  {name:<44} max gap {probe.max_gap * 1000:7.0f} ms   gaps>200ms {len(probe.stalls(0.2)):3d}   "
+    print(f"  {name:<44} max gap {probe.max_gap * 1000:7.0f} ms   GUI CPU {probe.max_cpu * 1000:4.0f} ms "
+          f"(in that gap {probe.cpu_at_max_gap * 1000:4.0f})   gaps>200ms {len(probe.stalls(0.2)):3d}   "
           f"wall {wall:6.1f} s   control stretch {control.stretch:5.1f}x (gap / stretch "
           f"{probe.max_gap * 1000 / control.stretch:5.0f} ms)", flush=True)
     if dog is not None:

@@ -27,6 +27,12 @@ class StallProbe:
         the GUI thread has not ticked for that long (see :attr:`traces`), to say *what* stalled."""
         self.interval_s = interval_ms / 1000.0
         self.max_gap = 0.0
+        # the GUI thread's own CPU time between two ticks (time.thread_time): the work an event
+        # did, far less inflated by other processes than the wall gap (a wait for the GIL or for
+        # the X server is in the wall gap only)
+        self.max_cpu = 0.0
+        self.cpu_at_max_gap = 0.0
+        self._last_cpu = time.thread_time()
         self.ticks = 0
         self.gaps: list[float] = []
         self.traces: list[str] = []
@@ -58,13 +64,18 @@ class StallProbe:
     def _tick(self) -> None:
         now = time.perf_counter()
         gap = now - self._last
+        cpu_now = time.thread_time()
+        cpu = cpu_now - self._last_cpu
         self.gaps.append(gap)
-        self.max_gap = max(self.max_gap, gap)
-        self._last = now
+        if gap > self.max_gap:
+            self.max_gap, self.cpu_at_max_gap = gap, cpu
+        self.max_cpu = max(self.max_cpu, cpu)
+        self._last, self._last_cpu = now, cpu_now
         self.ticks += 1
 
     def start(self) -> "StallProbe":
         self._last = time.perf_counter()
+        self._last_cpu = time.thread_time()
         self.timer.start()
         if self._trace_after:
             self._stop.clear()

@@ -270,6 +270,15 @@ def test_opencv_stereo_to_saved_rig_tallest_bar_is_engine_worst_view(qtbot, shar
         w.go_to_page(6)
         assert w.pages[5].message.isVisible() and "no depth camera" in w.pages[5].message.text()
         w.go_to_page(7)
+        # the note in place of the depth map is wrapped, not cut at both ends, on a 1280 x 720 screen
+        w.resize(1280 - 200, 720 - 60)
+        qtbot.wait(50)
+        note = w.pages[6].image
+        assert "no depth camera" in note.text()
+        fm = note.fontMetrics()
+        need = fm.boundingRect(note.contentsRect(), int(note.alignment() | Qt.TextFlag.TextWordWrap), note.text())
+        assert note.wordWrap() and note.contentsRect().contains(need), (need, note.contentsRect())
+        w.resize(1400, 900)
         out = tmp_path / "stereo.rig.json"
         # an existing rig file (someone's calibration) is never replaced without asking
         out.write_text('{"previous": "calibration"}\n')

@@ -58,6 +58,8 @@ class SavePage(WizardPage):
         gl.addLayout(top)
         self.image = QLabel()
         self.image.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.image.setWordWrap(True)  # its notes (no depth camera, ...) were cut at both ends at 1280 px
+        self.image.setMargin(12)
         self.image.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Ignored)
         self.image.setMinimumSize(320, 240)
         self.image.setStyleSheet("background: #202020; color: #dddddd;")
