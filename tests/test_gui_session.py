@@ -500,3 +500,20 @@ def test_a_region_is_not_carried_onto_another_target(demo_registered):
     assert "drawn on ir" in s.region_note and "thermal" in s.region_note and seen[-1] == s.region_note
     s.set_region("rect", (1, 1, 5, 5))  # a region drawn on the new grid belongs to it
     assert s.region_grid == ("thermal", (h, w)) and not s.region_note
+
+
+def test_wrong_folders_are_named_for_what_they_are(demo_dir, tmp_path):
+    """Technician pass 3: a calibration session dropped on the workspace was "not a rig file, a
+    recording folder or the data set"; an image picked as a session was "session folder not found"."""
+    from plantreg_gui.core.calibration.session import Session
+    from plantreg_gui.core.errors import InputError
+    from plantreg_gui.models.registration import kind_of_path
+
+    with pytest.raises(InputError, match="a calibration session, not a recording: open it in the Calibration tab"):
+        kind_of_path(demo_dir / "calibration")
+    img = tmp_path / "left.png"
+    img.write_bytes(b"\x89PNG\r\n\x1a\n")
+    with pytest.raises(InputError, match="is a file, not a session folder"):
+        Session.load(img)
+    with pytest.raises(InputError, match="session folder not found"):
+        Session.load(tmp_path / "missing")

@@ -267,6 +267,15 @@ def test_opencv_stereo_to_saved_rig_tallest_bar_is_engine_worst_view(qtbot, shar
         per_view = w.model.calibration.intrinsics["left"].per_view_px
         assert set(chart.bars["left"]) == set(per_view) and len(per_view) == 13
         assert chart.tallest("left") == max(per_view, key=per_view.get)
+        # on a 1280 x 720 screen every distortion coefficient is readable (was cut to "-0.…")
+        w.resize(1280 - 200, 720 - 60)
+        qtbot.wait(50)
+        table = w.pages[3].table
+        col = next(j for j in range(table.columnCount()) if "distortion" in table.horizontalHeaderItem(j).text())
+        widest = max(table.fontMetrics().horizontalAdvance(tok) for i in range(table.rowCount())
+                     for tok in table.item(i, col).text().split())
+        assert table.columnWidth(col) >= widest + 8, (table.columnWidth(col), widest)
+        w.resize(1400, 900)
         w.go_to_page(6)
         assert w.pages[5].message.isVisible() and "no depth camera" in w.pages[5].message.text()
         w.go_to_page(7)

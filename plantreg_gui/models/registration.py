@@ -107,6 +107,9 @@ def kind_of_path(p: Path) -> str:
         return "recording"
     if p.is_dir() and (p / "rig.json").is_file() and (p / "recording" / MANIFEST).is_file():
         return "demo"
+    if p.is_dir() and (p / "session.json").is_file():
+        raise InputError("a calibration session, not a recording: open it in the Calibration tab, whose last "
+                         "page saves the rig", p)
     raise InputError("not a rig file, a recording folder or the Plant3DImageReg data set", p)
 
 

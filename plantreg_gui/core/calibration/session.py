@@ -183,7 +183,8 @@ class Session:
             folder = folder.parent
         path = folder / SESSION_FILE
         if not folder.is_dir():
-            raise InputError("session folder not found", folder)
+            raise InputError("is a file, not a session folder (open the folder that holds session.json)"
+                             if folder.exists() else "session folder not found", folder)
         if not path.is_file():
             raise InputError(f"not a calibration session (no {SESSION_FILE})", folder)
         from ..validate import camera_name, show, unique_names

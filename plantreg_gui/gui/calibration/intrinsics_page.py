@@ -106,8 +106,9 @@ class IntrinsicsPage(WizardPage):
         else:
             set_banner(self.message, "")
         rows = results.intrinsic_rows(cal, self.model.report if self.model.report_ready() else None)
-        cols = ["camera", "fx", "fy", "cx", "cy", "lens model", "distortion (k1 k2 p1 p2 k3 …)",
-                "uncertainty px (median / worst)", "error px", "error norm.", "views", "weak views"]
+        # two-line headers: at 1280 px the one-line ones left the distortion column a few pixels
+        cols = ["camera", "fx", "fy", "cx", "cy", "lens\nmodel", "distortion\n(k1 k2 p1 p2 k3 …)",
+                "uncertainty px\n(median / worst)", "error\npx", "error\nnorm.", "views", "weak\nviews"]
         self.table.clear()
         self.table.setColumnCount(len(cols))
         self.table.setHorizontalHeaderLabels(cols)
