@@ -160,6 +160,19 @@ def _ws_switch_views(ctx: Context) -> None:
         ctx.wait(lambda: time.monotonic() - t > 0.2)
 
 
+def _ws_resize(ctx: Context) -> None:
+    """Side by side, then 3D, each resized 1400 x 900 -> 2560 x 1440 -> back, as a window is
+    maximised on a large screen (every view re-fits; the 3D view re-renders at the new size)."""
+    w = ctx.workspace()
+    for key in ("side-by-side", "3d"):
+        w.set_view(key)
+        ctx.wait(lambda: not getattr(w.cloud_view, "building", False))
+        for size in ((2560, 1440), (1400, 900)):
+            w.resize(*size)
+            t = time.monotonic()
+            ctx.wait(lambda: time.monotonic() - t > 0.5)
+
+
 def _ws_fresh_registered(ctx: Context) -> None:
     """A new workspace showing a registration: its 3D tab has never been shown."""
     ctx.workspace(fresh=True)
@@ -240,6 +253,7 @@ SCENARIOS: list[Scenario] = [
              _ws_idle),
     Scenario("workspace: export (all outputs)", _ws_registered, _ws_export_run, _ws_idle),
     Scenario("workspace: switch views", _ws_registered, _ws_switch_views, lambda ctx: True),
+    Scenario("workspace: resize to 2560 x 1440 and back", _ws_registered, _ws_resize, lambda ctx: True),
     Scenario("workspace: first show of the 3D tab", _ws_fresh_registered,
              lambda ctx: ctx.workspace().set_view("3d"), _ws_3d_shown),
     Scenario("workspace: Load demo (write, open, register)", _ws_load_demo_setup, _ws_load_demo_run, _ws_idle),
