@@ -577,7 +577,7 @@ class RegistrationSession:
         self.events.masks_source.emit()
         if self.region is not None:
             grid = (self.result.target, tuple(self.result.shape))
-            if self.region_grid != grid:  # its pixels are another camera's: they mean another place
+            if self.region_grid not in (None, grid):  # another camera's pixels: another place
                 was = self.region_grid
                 self.set_region(None)
                 self.region_note = (f"The region drawn on {was[0]} ({was[1][1]}x{was[1][0]}) was cleared: "

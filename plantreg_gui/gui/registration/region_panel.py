@@ -114,9 +114,10 @@ class RegionPanel(QGroupBox):
         self.csv_button.setEnabled(st is not None)
         self.clear_button.setEnabled(s.region is not None)
         if st is None:
+            hint = ("Choose Rectangle or Polygon and draw on a registered image: the chosen source's "
+                    "cases and values over the region appear here.")
             self.text.setText("" if s.result is None else "Computing the statistics…" if s.region is not None else
-                              (s.region_note + " " if s.region_note else "") + "Choose Rectangle or Polygon and draw on a registered image: the chosen source's "
-                              "cases and values over the region appear here.")
+                              f"{s.region_note} {hint}" if s.region_note else hint)
             self.spectrum.hide()
             return
         cases = "  ".join(f"{k} {n:,} ({p:.1f}%)" for k, (n, p) in st.cases.items() if n)
