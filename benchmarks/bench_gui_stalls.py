@@ -400,7 +400,8 @@ def run(names: list[str] | None = None, repeat: int = 1, why: bool = False) -> l
                 secs = time.perf_counter() - t0
                 rows.append((sc.name, secs, lp.probe.max_gap, len(lp.probe.stalls(0.2)), lp.worst_label))
                 print(f"{sc.name:<46} {secs:7.2f} s   max gap {lp.probe.max_gap * 1000:6.0f} ms   "
-                      f"GUI CPU {lp.probe.max_cpu * 1000:4.0f} ms (in that gap {lp.probe.cpu_at_max_gap * 1000:4.0f})   "
+                      f"GUI CPU {lp.probe.max_cpu * 1000:4.0f} ms "
+                      f"(in that gap {lp.probe.cpu_at_max_gap * 1000:4.0f})   "
                       f"gaps > 200 ms: {len(lp.probe.stalls(0.2)):2d}   control stretch {control.stretch:5.1f}x   "
                       f"before the longest: {lp.worst_label}", flush=True)
         for w in ctx.widgets.values():
