@@ -106,7 +106,7 @@ class IntrinsicsPage(WizardPage):
         else:
             set_banner(self.message, "")
         rows = results.intrinsic_rows(cal, self.model.report if self.model.report_ready() else None)
-        # two-line headers: at 1280 px the one-line ones left the distortion column a few pixels
+        # two-line headers and cells: at 1280 px one-line ones left the distortion column a few pixels
         cols = ["camera", "fx", "fy", "cx", "cy", "lens\nmodel", "distortion\n(k1 k2 p1 p2 k3 …)",
                 "uncertainty px\n(median / worst)", "error\npx", "error\nnorm.", "views", "weak\nviews"]
         self.table.clear()
@@ -117,8 +117,9 @@ class IntrinsicsPage(WizardPage):
         for i, r in enumerate(rows):
             sd = r["std"]
             sig = r["sigma"]
-            vals = [r["camera"], results.pm(r["fx"], sd.get("fx")), results.pm(r["fy"], sd.get("fy")),
-                    results.pm(r["cx"], sd.get("cx")), results.pm(r["cy"], sd.get("cy")), r["model"],
+            # value over its standard error: four narrower columns leave the distortion one room
+            pms = [results.pm(r[k], sd.get(k)).replace(" ± ", "\n± ") for k in ("fx", "fy", "cx", "cy")]
+            vals = [r["camera"], *pms, r["model"],
                     " ".join(f"{d:+.4f}" for d in r["dist"][:5]) + (" …" if len(r["dist"]) > 5 else ""),
                     f"{sig[0]:.2f} / {sig[1]:.2f}" if sig else "–",
                     fmt(r["px"], 3), fmt(r["normalized"], 3), str(r["views"]),
