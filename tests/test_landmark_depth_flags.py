@@ -268,3 +268,24 @@ def test_no_landmark_on_the_plant_is_flagged(seed):
         P = np.array([float(x) for x in lm.note.split("[")[1].split("]")[0].split(",")])
         c = check_landmark_depth(depth, lm.depth_uv, rig.ground_z)
         assert c.status == "ok" and c.z_m == pytest.approx(rig.depth().to_cam(P[None])[0, 2], abs=0.01), lm.note
+
+
+@pytest.mark.parametrize("seed", [7, 19])
+def test_the_silhouette_fits_landmark_term_takes_the_same_depth_as_the_landmark_fit(world, seed):
+    """``--silhouette`` uses landmarks as a term of its fit: an edge click that reads the ground
+    must put its 3D point on the leaf (snapped) as the landmark fit does, or leave it out
+    with ``--no-snap-depth``; never at the ground's depth (the click's pixel value)."""
+    from plantreg_gui.core.rigfit.silhouette import landmark_points
+
+    rig, scene, rec = world
+    depth = rec.depth_m(rig.depth_scale)
+    edge, z_true = edge_landmark(rig, scene, depth, np.random.default_rng(seed))
+    u, v = edge.depth_uv.astype(int)
+    assert depth[v, u] - z_true > 0.05  # the click's own pixel reads the ground
+    X, ok = landmark_points(rig, depth, edge.depth_uv[None])
+    assert ok[0]
+    z_used = float(rig.depth().to_cam(X)[0, 2])
+    assert z_used == pytest.approx(check_landmark_depth(depth, edge.depth_uv, rig.ground_z).z_m, abs=1e-9)
+    assert abs(z_used - z_true) < 0.01  # on the leaf
+    _X, ok_off = landmark_points(rig, depth, edge.depth_uv[None], snap=False)
+    assert not ok_off[0]
