@@ -11,7 +11,14 @@ infrared pixel near the plants) along its own silhouette's inward normal. A read
 ``"held_out"`` entry (why it is kept out of rig.json's fit) and ``"held_out_kind"`` (``independent``:
 read without any mark of a rig's prediction; ``found_with_rig``: located with rig.json's predictions)
 are carried over (build_landmarks.py writes those points to ``landmarks_heldout.json``), and so is
-``"session"`` (how a later session read it). The x 2.2 is a guess:
+``"session"`` (how a later session read it).
+
+Session 11 (issue 23): the readings of ``eye_readings_s11*.json`` (one file per reader, same format)
+are read too (a name in two files is refused). Their infrared point must also pass plantreg's own
+depth check after the step (``rigfit.check_landmark_depth``: not a depth jump to the ground or
+another surface) or the pair is dropped. Of each plant's kept session-11 thermal pairs, a fixed
+third is held out as ``"independent"`` (``held_out_s11``: the rule was fixed before any fit).
+The x 2.2 is a guess:
 the rig's local scale is 1.81-2.16 (1.85 near the image centre; ``step_variants.py scales``);
 the alternatives measured in session landmarks (README) were not better by the held-out measures.
 
@@ -31,6 +38,38 @@ from contour_points import plant_mask
 HERE = Path(__file__).resolve().parent
 SCALE = {"hyperspectral": 1.8, "thermal": 2.2}
 AGREE = {"ir": 2.0, "other": 4.0}
+S11_SEED = 2311  # session 11's held-out draw (fixed before any fit; README "Session 11")
+GROUND_Z = 1.15  # rig_nominal.json's ROI far limit: the tray's floor lies beyond it
+
+
+def readings() -> tuple[dict, set[str]]:
+    """All eye readings (``eye_readings.json`` + ``eye_readings_s11*.json``) and the names read in
+    session 11. A name in two files is refused (two readers' pairs must stay apart)."""
+    rd = json.loads((HERE / "eye_readings.json").read_text())
+    s11: set[str] = set()
+    for f in sorted(HERE.glob("eye_readings_s11*.json")):
+        for name, r in json.loads(f.read_text()).items():
+            if name in rd:
+                raise SystemExit(f"{f.name}: {name} is already read in another file")
+            rd[name] = r
+            s11.add(name)
+    return rd, s11
+
+
+def held_out_s11(kept: list[str], seed: int = S11_SEED) -> set[str]:
+    """Session-11 thermal names held out: per plant, ceil(n / 3) of its n kept pairs (sorted by
+    name, numpy generator seeded with ``seed``, the first of a permutation): every plant with new
+    pairs keeps at least one pair out of the fit as an independent check."""
+    rng = np.random.default_rng(seed)
+    by: dict[str, list[str]] = {}
+    for n in sorted(kept):
+        if n.split("#")[0].endswith("/thermal"):
+            by.setdefault(n.split("/")[0], []).append(n)
+    out: set[str] = set()
+    for plant in sorted(by):
+        g = by[plant]
+        out |= {g[i] for i in rng.permutation(len(g))[:-(-len(g) // 3)]}
+    return out
 
 
 def inward_normal(plant: str, cam: str, uv: np.ndarray, radius: float) -> np.ndarray:
@@ -56,8 +95,14 @@ def inward_normal(plant: str, cam: str, uv: np.ndarray, radius: float) -> np.nda
 
 
 def main() -> None:
-    rd = json.loads((HERE / "eye_readings.json").read_text())
+    import sys
+
+    sys.path.insert(0, str(HERE.parents[2]))  # the project root (plantreg_gui)
+    from plantreg_gui.core.rigfit.rigfit import check_landmark_depth
+
+    rd, s11 = readings()
     out: dict[str, list] = {}
+    names: dict[int, str] = {}
     dropped = []
     depth_cache: dict[str, np.ndarray] = {}
     for name, r in rd.items():
@@ -88,11 +133,24 @@ def main() -> None:
         if step is None:
             dropped.append((name, "no valid depth within 10 px"))
             continue
+        if name in s11:
+            chk = check_landmark_depth(d / 1000.0, pi + ni * step, GROUND_Z, snap=False)
+            if chk.status != "ok":
+                dropped.append((name, f"depth check: {chk.status}"))
+                continue
         out.setdefault(key, []).append({
             "ir": np.round(pi + ni * step, 2).tolist(), "other": np.round(po + no * step * SCALE[cam], 2).tolist(),
             "note": r["note"], "feature_ir": pi.round(2).tolist(), "feature_other": po.round(2).tolist(),
             "inward_step_ir_px": step, **{k: r[k] for k in ("held_out", "held_out_kind", "session") if k in r},
             "how": "mean of two eye readings of the silhouette feature (reclick.py crops), moved inward onto valid depth"})
+        names[id(out[key][-1])] = name
+    held = held_out_s11([n for n in names.values() if n in s11])
+    for key, items in out.items():
+        for it in items:
+            if names[id(it)] in held:
+                it["held_out"] = ("session 11: a fixed third of each plant's new thermal pairs (finalize.held_out_s11, "
+                                  f"seed {S11_SEED}), chosen before any fit; read without any rig's prediction")
+                it["held_out_kind"] = "independent"
     (HERE / "annotations.json").write_text(json.dumps(out, indent=1) + "\n")
     print({k: len(v) for k, v in out.items()}, "dropped:", dropped)
 
@@ -101,7 +159,7 @@ def main() -> None:
 
 def agreement() -> None:
     """RMS difference between the two readings, per camera (all read points, and the kept ones)."""
-    rd = json.loads((HERE / "eye_readings.json").read_text())
+    rd, _ = readings()
     for subset in ("all", "kept"):
         diffs: dict[str, list[float]] = {}
         for name, r in rd.items():
