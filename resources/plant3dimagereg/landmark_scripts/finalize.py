@@ -94,6 +94,36 @@ def inward_normal(plant: str, cam: str, uv: np.ndarray, radius: float) -> np.nda
     return c / max(np.linalg.norm(c), 1e-9)
 
 
+def find_step(d: np.ndarray, pi: np.ndarray, ni: np.ndarray) -> float | None:
+    """Smallest step (0-10 px, 0.5 px apart) along ``ni`` from ``pi`` onto valid leaf depth: on the
+    plant (< 1.13 m, not the tray), a consistent 3x3 neighbourhood, within 25 mm of the leaf 4 px further in."""
+    for s in np.arange(0.0, 10.01, 0.5):
+        u, v = np.round(pi + ni * s).astype(int)
+        blk = d[v - 1:v + 2, u - 1:u + 2].astype(float)
+        ok = blk[blk > 0]
+        u2, v2 = np.round(pi + ni * (s + 4)).astype(int)  # the same leaf 4 px further in
+        inner = d[v2 - 1:v2 + 2, u2 - 1:u2 + 2].astype(float)
+        inner = inner[inner > 0]
+        if (blk.shape == (3, 3) and 0 < blk[1, 1] < 1130 and ok.size >= 7  # on the plant, not the tray
+                and np.max(np.abs(ok - np.median(ok))) < 15 and abs(blk[1, 1] - np.median(ok)) < 8
+                and inner.size and abs(blk[1, 1] - np.median(inner)) < 25):
+            return float(s)
+    return None
+
+
+def front_normal(d: np.ndarray, uv: np.ndarray, radius: float) -> np.ndarray:
+    """Unit vector from ``uv`` towards the centroid of the front surface's pixels within ``radius``
+    (valid depth within 25 mm of the window's 5th-percentile depth): into the near leaf at its margin."""
+    r0, c0 = max(int(uv[1] - radius), 0), max(int(uv[0] - radius), 0)
+    win = d[r0:int(uv[1] + radius) + 1, c0:int(uv[0] + radius) + 1].astype(float)
+    near = np.percentile(win[win > 0], 5)
+    v, u = np.nonzero((win > 0) & (win < near + 25))
+    u, v = u + c0, v + r0
+    keep = (u - uv[0]) ** 2 + (v - uv[1]) ** 2 <= radius ** 2
+    c = np.array([u[keep].mean(), v[keep].mean()]) - uv
+    return c / max(np.linalg.norm(c), 1e-9)
+
+
 def main() -> None:
     import sys
 
@@ -117,19 +147,14 @@ def main() -> None:
         d = depth_cache.setdefault(plant, load(plant, "depth"))
         ni = inward_normal(plant, "ir", pi, 8.0)
         no = inward_normal(plant, cam, po, 8.0 * SCALE[cam])
-        step = None
-        for s in np.arange(0.0, 10.01, 0.5):
-            u, v = np.round(pi + ni * s).astype(int)
-            blk = d[v - 1:v + 2, u - 1:u + 2].astype(float)
-            ok = blk[blk > 0]
-            u2, v2 = np.round(pi + ni * (s + 4)).astype(int)  # the same leaf 4 px further in
-            inner = d[v2 - 1:v2 + 2, u2 - 1:u2 + 2].astype(float)
-            inner = inner[inner > 0]
-            if (blk.shape == (3, 3) and 0 < blk[1, 1] < 1130 and ok.size >= 7  # on the plant, not the tray
-                    and np.max(np.abs(ok - np.median(ok))) < 15 and abs(blk[1, 1] - np.median(ok)) < 8
-                    and inner.size and abs(blk[1, 1] - np.median(inner)) < 25):
-                step = float(s)
-                break
+        step, how_in = find_step(d, pi, ni), "plant mask"
+        if step is None and name in s11:
+            # a near leaf's margin seen over a leaf below (both are plant): the point belongs to the
+            # front surface; the other camera's direction is the infrared one turned as the camera
+            # is (thermal x = -infrared y, thermal y = infrared x; hyperspectral the other way)
+            ni, how_in = front_normal(d, pi, 8.0), "front surface"
+            no = np.array([-ni[1], ni[0]]) if cam == "thermal" else np.array([ni[1], -ni[0]])
+            step = find_step(d, pi, ni)
         if step is None:
             dropped.append((name, "no valid depth within 10 px"))
             continue
@@ -141,7 +166,7 @@ def main() -> None:
         out.setdefault(key, []).append({
             "ir": np.round(pi + ni * step, 2).tolist(), "other": np.round(po + no * step * SCALE[cam], 2).tolist(),
             "note": r["note"], "feature_ir": pi.round(2).tolist(), "feature_other": po.round(2).tolist(),
-            "inward_step_ir_px": step, **{k: r[k] for k in ("held_out", "held_out_kind", "session") if k in r},
+            "inward_step_ir_px": step, **({"inward_direction": how_in} if how_in != "plant mask" else {}), **{k: r[k] for k in ("held_out", "held_out_kind", "session") if k in r},
             "how": "mean of two eye readings of the silhouette feature (reclick.py crops), moved inward onto valid depth"})
         names[id(out[key][-1])] = name
     held = held_out_s11([n for n in names.values() if n in s11])
