@@ -22,7 +22,11 @@ The x 2.2 is a guess:
 the rig's local scale is 1.81-2.16 (1.85 near the image centre; ``step_variants.py scales``);
 the alternatives measured in session landmarks (README) were not better by the held-out measures.
 
-  python resources/plant3dimagereg/landmark_scripts/finalize.py
+  python resources/plant3dimagereg/landmark_scripts/finalize.py [--thermal-scale X --out FILE]
+
+``--thermal-scale X``: the thermal step as X thermal px per infrared px instead of 2.2 (session 11
+measured 1.98 from the pairs themselves, ``pair_scale.py``), written to FILE instead of
+annotations.json (``ANNOTATIONS=FILE refit_eval.py ...`` measures it).
 """
 
 from __future__ import annotations
@@ -124,7 +128,7 @@ def front_normal(d: np.ndarray, uv: np.ndarray, radius: float) -> np.ndarray:
     return c / max(np.linalg.norm(c), 1e-9)
 
 
-def main() -> None:
+def main(out_path: Path | None = None) -> None:
     import sys
 
     sys.path.insert(0, str(HERE.parents[2]))  # the project root (plantreg_gui)
@@ -176,7 +180,7 @@ def main() -> None:
                 it["held_out"] = ("session 11: a fixed third of each plant's new thermal pairs (finalize.held_out_s11, "
                                   f"seed {S11_SEED}), chosen before any fit; read without any rig's prediction")
                 it["held_out_kind"] = "independent"
-    (HERE / "annotations.json").write_text(json.dumps(out, indent=1) + "\n")
+    (out_path or HERE / "annotations.json").write_text(json.dumps(out, indent=1) + "\n")
     print({k: len(v) for k, v in out.items()}, "dropped:", dropped)
 
 
@@ -203,4 +207,10 @@ def agreement() -> None:
 if __name__ == "__main__":
     import sys
 
-    agreement() if sys.argv[1:] == ["--agreement"] else main()
+    if sys.argv[1:] == ["--agreement"]:
+        agreement()
+    elif "--thermal-scale" in sys.argv:
+        SCALE["thermal"] = float(sys.argv[sys.argv.index("--thermal-scale") + 1])
+        main(Path(sys.argv[sys.argv.index("--out") + 1]))
+    else:
+        main()

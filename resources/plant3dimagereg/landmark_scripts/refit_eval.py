@@ -11,7 +11,9 @@ the reading). Two ways of leaving pairs out, both fixed before any fit:
 * ``half SEED``: a fixed random half of each plant's pairs per camera (``numpy`` generator seeded
   with SEED; odd counts put the extra pair in half A), two folds: fit A measure B, fit B measure A.
 
-``heldout [FREE]``: fit to the pairs of ``landmarks.json``, measure the ``"held_out"`` pairs.
+``heldout [FREE]``: fit to the pairs not marked ``"held_out"`` (``landmarks.json``'s, and since session 11
+the new pairs outside its held-out third), measure the ``"held_out"`` pairs; ``--out RIG`` writes the fit.
+Environment ANNOTATIONS=FILE: another annotations file (``finalize.py --thermal-scale X --out FILE``).
 ``--fit-land12`` (with ``heldout`` and ``lopo --fit-only``): the refit of session landmarks, measured
 and not shipped: the 5 land12 pairs (``"held_out_kind": "found_with_rig"``) join the fit (31 pairs),
 only the 2 ``independent`` ones are held out.
@@ -23,7 +25,7 @@ FREE: as for ``fit-rig --free`` (default ``ir:k1``), or ``2stage:FREE`` (see ``f
 
   cd resources/plant3dimagereg/landmark_scripts && PYTHONPATH=../../.. python refit_eval.py lopo [FREE] [--fit-only] [--fit-land12]
   cd resources/plant3dimagereg/landmark_scripts && PYTHONPATH=../../.. python refit_eval.py half 23 [FREE]
-  cd resources/plant3dimagereg/landmark_scripts && PYTHONPATH=../../.. python refit_eval.py heldout [FREE] [--fit-land12]
+  cd resources/plant3dimagereg/landmark_scripts && PYTHONPATH=../../.. python refit_eval.py heldout [FREE] [--fit-land12] [--out RIG]
   cd resources/plant3dimagereg/landmark_scripts && PYTHONPATH=../../.. python refit_eval.py rig ../rig.json
   cd resources/plant3dimagereg/landmark_scripts && PYTHONPATH=../../.. python refit_eval.py check ../rig.json
 """
@@ -52,13 +54,19 @@ def pairs() -> list[tuple[str, str, Landmark]]:
     """(plant, camera, landmark) for every pair of annotations.json, in file order. Environment
     THERMAL_STEP=none: the thermal point as read (``feature_other``), without finalize.py's inward
     move (the infrared point keeps its move onto valid depth)."""
-    ann = json.loads((HERE / "annotations.json").read_text())
+    ann = json.loads(annotations_path().read_text())
     nostep = os.environ.get("THERMAL_STEP") == "none"
     return [(k.split("/")[0], k.split("/")[1],
              Landmark(np.array(it["ir"], float),
                       {k.split("/")[1]: np.array(it["feature_other" if nostep and k.endswith("/thermal") else "other"], float)},
                       it.get("note", "")))
             for k in sorted(ann) for it in ann[k]]
+
+
+def annotations_path() -> Path:
+    """``annotations.json``, or the file named by the environment variable ANNOTATIONS (a variant
+    written by ``finalize.py --thermal-scale X --out FILE``)."""
+    return Path(os.environ["ANNOTATIONS"]) if os.environ.get("ANNOTATIONS") else HERE / "annotations.json"
 
 
 _DEPTH: dict[str, np.ndarray] = {}
@@ -121,7 +129,7 @@ def held_out_keys(fit_land12: bool = False) -> set[tuple[str, str, str]]:
 
 def held_out_kinds() -> dict[tuple[str, str, str], str]:
     """(plant, camera, note) -> ``"held_out_kind"`` of the held-out pairs of annotations.json."""
-    ann = json.loads((HERE / "annotations.json").read_text())
+    ann = json.loads(annotations_path().read_text())
     return {(*k.split("/"), it["note"]): it.get("held_out_kind", "?") for k in ann for it in ann[k]
             if it.get("held_out")}
 
@@ -160,6 +168,11 @@ def halves(all_pairs, seed: int) -> tuple[list, list]:
 def main() -> None:
     land12 = "--fit-land12" in sys.argv
     fit_only = "--fit-only" in sys.argv
+    save = None
+    if "--out" in sys.argv:  # heldout: write the fitted rig (then ``check OUT`` splits its held-out pairs by kind)
+        i = sys.argv.index("--out")
+        save = Path(sys.argv[i + 1])
+        del sys.argv[i:i + 2]
     sys.argv = [a for a in sys.argv if a not in ("--fit-land12", "--fit-only")]
     cmd = sys.argv[1]
     start = Rig.load(RES / "rig_nominal.json")
@@ -175,6 +188,8 @@ def main() -> None:
         fit_on = [t for t in P if (t[0], t[1], t[2].note) not in held]
         out = [t for t in P if (t[0], t[1], t[2].note) in held]
         r = fit(fit_on, start, free)
+        if save:
+            r.save(save)
         src = "landmarks.json + the 5 land12 pairs" if land12 else "landmarks.json"
         report(f"--free {free} fitted to the {len(fit_on)} pairs ({src}; in-sample)", residuals(r, fit_on))
         report(f"  the same rig on the {len(out)} held-out pairs", residuals(r, out))
