@@ -16,7 +16,7 @@ are carried over (build_landmarks.py writes those points to ``landmarks_heldout.
 Session 11 (issue 23): the readings of ``eye_readings_s11*.json`` (one file per reader, same format)
 are read too (a name in two files is refused). Their infrared point must also pass plantreg's own
 depth check after the step (``rigfit.check_landmark_depth``: not a depth jump to the ground or
-another surface) or the pair is dropped. Of each plant's kept session-11 thermal pairs, a fixed
+another surface) or the pair is dropped. Of the kept session-11 thermal pairs, a fixed seeded
 third is held out as ``"independent"`` (``held_out_s11``: the rule was fixed before any fit).
 The x 2.2 is a guess:
 the rig's local scale is 1.81-2.16 (1.85 near the image centre; ``step_variants.py scales``);
@@ -61,19 +61,12 @@ def readings() -> tuple[dict, set[str]]:
 
 
 def held_out_s11(kept: list[str], seed: int = S11_SEED) -> set[str]:
-    """Session-11 thermal names held out: per plant, ceil(n / 3) of its n kept pairs (sorted by
-    name, numpy generator seeded with ``seed``, the first of a permutation): every plant with new
-    pairs keeps at least one pair out of the fit as an independent check."""
-    rng = np.random.default_rng(seed)
-    by: dict[str, list[str]] = {}
-    for n in sorted(kept):
-        if n.split("#")[0].endswith("/thermal"):
-            by.setdefault(n.split("/")[0], []).append(n)
-    out: set[str] = set()
-    for plant in sorted(by):
-        g = by[plant]
-        out |= {g[i] for i in rng.permutation(len(g))[:-(-len(g) // 3)]}
-    return out
+    """Session-11 thermal names held out: ceil(n / 3) of all n kept session-11 thermal pairs (pooled
+    over the plants: the readers found 0-2 per plant, and a third per plant would hold out every
+    pair of a plant with one), the first of a permutation of the sorted names by a numpy generator
+    seeded with ``seed``. Fixed before any fit with the new pairs (README "Session 11")."""
+    g = sorted(n for n in kept if n.split("#")[0].endswith("/thermal"))
+    return {g[i] for i in np.random.default_rng(seed).permutation(len(g))[:-(-len(g) // 3)]}
 
 
 def inward_normal(plant: str, cam: str, uv: np.ndarray, radius: float) -> np.ndarray:
@@ -177,7 +170,7 @@ def main(out_path: Path | None = None) -> None:
     for key, items in out.items():
         for it in items:
             if names[id(it)] in held:
-                it["held_out"] = ("session 11: a fixed third of each plant's new thermal pairs (finalize.held_out_s11, "
+                it["held_out"] = ("session 11: a fixed seeded third of the new thermal pairs (finalize.held_out_s11, "
                                   f"seed {S11_SEED}), chosen before any fit; read without any rig's prediction")
                 it["held_out_kind"] = "independent"
     (out_path or HERE / "annotations.json").write_text(json.dumps(out, indent=1) + "\n")

@@ -17,6 +17,7 @@ Environment ANNOTATIONS=FILE: another annotations file (``finalize.py --thermal-
 ``--fit-land12`` (with ``heldout`` and ``lopo --fit-only``): the refit of session landmarks, measured
 and not shipped: the 5 land12 pairs (``"held_out_kind": "found_with_rig"``) join the fit (31 pairs),
 only the 2 ``independent`` ones are held out.
+``newloo [FREE]``: each session-11 pair of the fit left out alone (fitted to everything else of the fit).
 ``rig RIG``: the residuals of RIG on all pairs, per camera and plant (no fitting).
 ``check RIG``: the residuals of RIG on the held-out pairs, per pair and per ``"held_out_kind"``
 (``independent``: read without a rig's prediction in view; ``found_with_rig``: located with
@@ -207,6 +208,19 @@ def main() -> None:
             for c, v in r.items():
                 held.setdefault(c, []).extend(v)
         report(f"leave-one-plant-out, --free {free}, {len(P)} pairs", held)
+    elif cmd == "newloo":  # each session-11 pair of the fit left out alone, everything else of the fit in
+        free = sys.argv[2] if len(sys.argv) > 2 else "ir:k1"
+        ann = json.loads(annotations_path().read_text())
+        new = {(*k.split("/"), it["note"]) for k in ann for it in ann[k]
+               if str(it.get("session", "")).startswith("s11") and not it.get("held_out")}
+        fit_on = [t for t in P if (t[0], t[1], t[2].note) not in held_out_keys()]
+        held: dict[str, list] = {}
+        for key in sorted(new):
+            out = [t for t in fit_on if (t[0], t[1], t[2].note) == key]
+            for c, v in residuals(fit([t for t in fit_on if (t[0], t[1], t[2].note) != key], start, free), out).items():
+                print(f"  {key[0]} {key[1]} left out: {v[0][1]:.2f} px  ({key[2][:60]})")
+                held.setdefault(c, []).extend(v)
+        report(f"each session-11 fit pair left out alone, --free {free}", held)
     elif cmd == "half":
         seed, free = int(sys.argv[2]), (sys.argv[3] if len(sys.argv) > 3 else "ir:k1")
         a, b = halves(P, seed)
