@@ -13,8 +13,12 @@ read without any mark of a rig's prediction; ``found_with_rig``: located with ri
 are carried over (build_landmarks.py writes those points to ``landmarks_heldout.json``), and so is
 ``"session"`` (how a later session read it).
 
-Session 11 (issue 23): the readings of ``eye_readings_s11*.json`` (one file per reader, same format)
-are read too (a name in two files is refused). Their infrared point must also pass plantreg's own
+Session 11 (issue 23): the readings of ``eye_readings_s11*.json`` (one file per reader, same format;
+a reading with ``"dropped"`` is the reader's own verdict that it is no landmark and is skipped)
+are read too (a name in two files is refused). Their inward step goes towards the front surface
+(``front_normal``: a near leaf's margin seen over a leaf below belongs to the near leaf; the plant
+mask holds both), the other camera's along the infrared step turned as the camera is, and their
+infrared point must also pass plantreg's own
 depth check after the step (``rigfit.check_landmark_depth``: not a depth jump to the ground or
 another surface) or the pair is dropped. Of the kept session-11 thermal pairs, a fixed seeded
 third is held out as ``"independent"`` (``held_out_s11``: the rule was fixed before any fit).
@@ -135,6 +139,9 @@ def main(out_path: Path | None = None) -> None:
     for name, r in rd.items():
         key, _ = name.split("#")
         plant, cam = key.split("/")
+        if r.get("dropped"):  # the reader's own verdict (a session-11 reading kept as read, not a landmark)
+            dropped.append((name, "reader: " + str(r["dropped"])[:60]))
+            continue
         a1, a2 = np.asarray(r["r1"]["ir"], float), np.asarray(r["r2"]["ir"], float)
         b1, b2 = np.asarray(r["r1"]["other"], float), np.asarray(r["r2"]["other"], float)
         if np.linalg.norm(a1 - a2) > AGREE["ir"] or np.linalg.norm(b1 - b2) > AGREE["other"]:
@@ -144,14 +151,16 @@ def main(out_path: Path | None = None) -> None:
         d = depth_cache.setdefault(plant, load(plant, "depth"))
         ni = inward_normal(plant, "ir", pi, 8.0)
         no = inward_normal(plant, cam, po, 8.0 * SCALE[cam])
-        step, how_in = find_step(d, pi, ni), "plant mask"
-        if step is None and name in s11:
-            # a near leaf's margin seen over a leaf below (both are plant): the point belongs to the
-            # front surface; the other camera's direction is the infrared one turned as the camera
-            # is (thermal x = -infrared y, thermal y = infrared x; hyperspectral the other way)
+        how_in = "plant mask"
+        if name in s11:
+            # session 11: a silhouette point belongs to the front surface, also where a near leaf's
+            # margin is seen over a leaf below (both are plant: the plant mask's centroid can lie on
+            # the leaf behind, and the step would land there); the other camera's direction is the
+            # infrared one turned as the camera is (thermal x = -infrared y, thermal y = infrared x;
+            # hyperspectral the other way), not its own silhouette's
             ni, how_in = front_normal(d, pi, 8.0), "front surface"
             no = np.array([-ni[1], ni[0]]) if cam == "thermal" else np.array([ni[1], -ni[0]])
-            step = find_step(d, pi, ni)
+        step = find_step(d, pi, ni)
         if step is None:
             dropped.append((name, "no valid depth within 10 px"))
             continue
@@ -163,7 +172,7 @@ def main(out_path: Path | None = None) -> None:
         out.setdefault(key, []).append({
             "ir": np.round(pi + ni * step, 2).tolist(), "other": np.round(po + no * step * SCALE[cam], 2).tolist(),
             "note": r["note"], "feature_ir": pi.round(2).tolist(), "feature_other": po.round(2).tolist(),
-            "inward_step_ir_px": step, **({"inward_direction": how_in} if how_in != "plant mask" else {}), **{k: r[k] for k in ("held_out", "held_out_kind", "session") if k in r},
+            "inward_step_ir_px": step, **({"inward_direction": how_in} if name in s11 else {}), **{k: r[k] for k in ("held_out", "held_out_kind", "session") if k in r},
             "how": "mean of two eye readings of the silhouette feature (reclick.py crops), moved inward onto valid depth"})
         names[id(out[key][-1])] = name
     held = held_out_s11([n for n in names.values() if n in s11])
