@@ -197,7 +197,7 @@ def agreement() -> None:
             cam = name.split("#")[0].split("/")[1]
             di = float(np.linalg.norm(np.subtract(r["r1"]["ir"], r["r2"]["ir"])))
             do = float(np.linalg.norm(np.subtract(r["r1"]["other"], r["r2"]["other"])))
-            if subset == "kept" and (di > AGREE["ir"] or do > AGREE["other"]):
+            if subset == "kept" and (di > AGREE["ir"] or do > AGREE["other"] or r.get("dropped")):
                 continue
             diffs.setdefault("ir", []).append(di)
             diffs.setdefault(cam, []).append(do)

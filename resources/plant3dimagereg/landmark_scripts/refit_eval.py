@@ -17,6 +17,9 @@ Environment ANNOTATIONS=FILE: another annotations file (``finalize.py --thermal-
 ``--fit-land12`` (with ``heldout`` and ``lopo --fit-only``): the refit of session landmarks, measured
 and not shipped: the 5 land12 pairs (``"held_out_kind": "found_with_rig"``) join the fit (31 pairs),
 only the 2 ``independent`` ones are held out.
+``lopo ... --measure-all`` (with ``--fit-only``): each fold measured on every pair of the plant left out
+(held out ones too), so that two pools are compared on the same pairs; ``--no-s11``: the pool without
+the session-11 pairs (the shipped rig's procedure).
 ``newloo [FREE]``: each session-11 pair of the fit left out alone (fitted to everything else of the fit).
 ``rig RIG``: the residuals of RIG on all pairs, per camera and plant (no fitting).
 ``check RIG``: the residuals of RIG on the held-out pairs, per pair and per ``"held_out_kind"``
@@ -145,6 +148,12 @@ def held_out_kinds() -> dict[tuple[str, str, str], str]:
             if it.get("held_out")}
 
 
+def s11_keys() -> set[tuple[str, str, str]]:
+    """(plant, camera, note) of the session-11 pairs (``"session"`` starting with ``s11``)."""
+    ann = json.loads(annotations_path().read_text())
+    return {(*k.split("/"), it["note"]) for k in ann for it in ann[k] if str(it.get("session", "")).startswith("s11")}
+
+
 def check(rig: Rig) -> None:
     kinds = held_out_kinds()
     sel = [t for t in pairs() if (t[0], t[1], t[2].note) in kinds]
@@ -179,15 +188,19 @@ def halves(all_pairs, seed: int) -> tuple[list, list]:
 def main() -> None:
     land12 = "--fit-land12" in sys.argv
     fit_only = "--fit-only" in sys.argv
+    measure_all = "--measure-all" in sys.argv  # lopo --fit-only: measure every pair of the plant left out
+    no_s11 = "--no-s11" in sys.argv  # the pool without the session-11 pairs (the shipped rig's procedure)
     save = None
     if "--out" in sys.argv:  # heldout: write the fitted rig (then ``check OUT`` splits its held-out pairs by kind)
         i = sys.argv.index("--out")
         save = Path(sys.argv[i + 1])
         del sys.argv[i:i + 2]
-    sys.argv = [a for a in sys.argv if a not in ("--fit-land12", "--fit-only")]
+    sys.argv = [a for a in sys.argv if a not in ("--fit-land12", "--fit-only", "--measure-all", "--no-s11")]
     cmd = sys.argv[1]
     start = Rig.load(RES / "rig_nominal.json")
     P = pairs()
+    if no_s11:
+        P = [t for t in P if (t[0], t[1], t[2].note) not in s11_keys()]
     if cmd == "rig":
         report(f"{sys.argv[2]} on all {len(P)} pairs (fitted or not)", residuals(Rig.load(sys.argv[2]), P))
     elif cmd == "check":
@@ -208,10 +221,12 @@ def main() -> None:
         free = sys.argv[2] if len(sys.argv) > 2 else "ir:k1"
         if fit_only:  # the pairs of the fit only (as fit-rig's own leave-one-out)
             P = [t for t in P if (t[0], t[1], t[2].note) not in held_out_keys(land12)]
+        everything = pairs()
         held: dict[str, list] = {}
         for plant in sorted({p for p, _, _ in P}):
+            measured = [t for t in (everything if measure_all else P) if t[0] == plant]
             try:
-                r = residuals(fit([t for t in P if t[0] != plant], start, free), [t for t in P if t[0] == plant])
+                r = residuals(fit([t for t in P if t[0] != plant], start, free), measured)
             except InputError as e:  # e.g. too few thermal pairs left without this plant
                 print(f"  {plant} left out: no fit ({e}); its pairs are not in the figures below")
                 continue
