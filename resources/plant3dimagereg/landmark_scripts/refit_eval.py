@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -104,7 +105,19 @@ def fit(sel, start: Rig, free: str) -> Rig:
         r2 = fit_rig(r1.rig, recs([t for t in sel if t[1] == "thermal"], start), free=f2, loo=False)
         NOT_FITTED.update(r1.report.get("not_fitted", {}), **r2.report.get("not_fitted", {}))
         return r2.rig
-    r = fit_rig(start, recs(sel, start), free=parse_free(free) if free else frozenset(), loo=False)
+    f = parse_free(free) if free else frozenset()
+    try:
+        r = fit_rig(start, recs(sel, start), free=f, loo=False)
+    except InputError as e:
+        # a camera left with too few pairs after the outlier rejection: fit the others (as
+        # ``fit-rig --fit``) and leave that one at its start pose, named like a thin camera
+        m = re.match(r"camera '([^']+)'", str(e))
+        if not m:
+            raise
+        others = sorted({t[1] for t in sel} - {m.group(1)})
+        r = fit_rig(start, recs([t for t in sel if t[1] in others], start),
+                    free=frozenset(x for x in f if not x.startswith(m.group(1) + ":")), cameras=others, loo=False)
+        NOT_FITTED[m.group(1)] = str(e)[:120]
     NOT_FITTED.update(r.report.get("not_fitted", {}))
     return r.rig
 
