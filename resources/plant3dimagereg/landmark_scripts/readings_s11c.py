@@ -1,0 +1,13 @@
+# raw eye readings (pixel centres at integers). inward: unit-ish IR direction into the leaf (for the depth step)
+R = {
+ "04philodendron/top_left_leaf_apex": {"r1": {"ir": [237.0, 79.0], "thermal": [619.0, 104.5]},
+                                       "r2": {"ir": [237.5, 78.5], "thermal": [619.5, 105.0]}, "inward": [0.3, 1.0]},
+ "04philodendron/top_right_leaf_lower_right_corner": {"r1": {"ir": [385.0, 222.5], "thermal": [355.0, 424.0]},
+                                       "r2": {"ir": [385.0, 222.5], "thermal": [354.0, 422.5]}, "inward": [-0.7, -0.7]},
+ "02leopard_lily/top_leaf_tip": {"r1": {"ir": [287.5, 128.5], "thermal": [561.0, 229.0]},
+                                 "r2": {"ir": [288.0, 128.0], "thermal": [557.5, 228.5]}, "inward": [0.35, 0.94]},
+ "01grapevine/top_leaf_notch_at_stake": {"r1": {"ir": [315.0, 148.0], "thermal": [478.0, 287.0]},
+                                 "r2": {"ir": [318.5, 148.5], "thermal": None}, "inward": [0, 1]},
+ "01grapevine/bottom_leaf_lowest_lobe_tip": {"r1": {"ir": [320.5, 336.0], "thermal": [108.5, 284.0]},
+                                 "r2": {"ir": [321.0, 336.5], "thermal": [109.5, 279.0]}, "inward": [0, -1]},
+}
