@@ -11,3 +11,7 @@ R = {
  "01grapevine/bottom_leaf_lowest_lobe_tip": {"r1": {"ir": [320.5, 336.0], "thermal": [108.5, 284.0]},
                                  "r2": {"ir": [321.0, 336.5], "thermal": [109.5, 279.0]}, "inward": [0, -1]},
 }
+R["04philodendron/bottom_dark_leaf_apex"] = {"r1": {"ir": [293.5, 400.5], "thermal": [21.0, 241.0]},
+                                            "r2": {"ir": [293.0, 400.5], "thermal": [21.5, 240.0]}, "inward": [-0.2, -1.0]}
+R["02leopard_lily/upper_left_leaf_tip"] = {"r1": {"ir": [221.5, 160.0], "thermal": [440.0, 88.0]},
+                                          "r2": {"ir": [222.0, 159.5], "thermal": [441.5, 87.5]}, "inward": [0.5, 0.87]}
