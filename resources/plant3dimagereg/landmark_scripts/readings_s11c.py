@@ -15,3 +15,10 @@ R["04philodendron/bottom_dark_leaf_apex"] = {"r1": {"ir": [293.5, 400.5], "therm
                                             "r2": {"ir": [293.0, 400.5], "thermal": [21.5, 240.0]}, "inward": [-0.2, -1.0]}
 R["02leopard_lily/upper_left_leaf_tip"] = {"r1": {"ir": [221.5, 160.0], "thermal": [440.0, 88.0]},
                                           "r2": {"ir": [222.0, 159.5], "thermal": [441.5, 87.5]}, "inward": [0.5, 0.87]}
+R["04philodendron/front_leaf_apex_down"] = {"r1": {"ir": [376.5, 374.5], "thermal": [45.5, 395.0]},
+                                           "r2": {"ir": [376.5, 374.0], "thermal": [46.5, 389.0]}, "inward": [-0.5, -0.87]}
+# infrared-hyperspectral pairs (cam "hyperspectral"; HS is turned ~90 deg anticlockwise: IR (du, dv) -> HS (dv, -du))
+R["04philodendron/top_right_leaf_lower_right_corner#hs"] = {"cam": "hyperspectral",
+    "r1": {"ir": [385.0, 222.5], "hyperspectral": [216.0, 148.5]}, "r2": {"ir": [385.5, 222.5], "hyperspectral": [217.0, 149.5]}, "inward": [-0.7, -0.7]}
+R["04philodendron/front_leaf_apex_down#hs"] = {"cam": "hyperspectral",
+    "r1": {"ir": [377.0, 374.5], "hyperspectral": [479.0, 170.0]}, "r2": {"ir": [376.5, 374.0], "hyperspectral": [480.5, 167.5]}, "inward": [-0.5, -0.87]}
