@@ -28,8 +28,10 @@ for key, r in R.items():
         diffs[c] = float(np.hypot(*np.subtract(r["r1"][c], r["r2"][c])))
         ok &= diffs[c] <= TOL[c]
     r["diff_px"] = diffs
+    if r.get("drop"):
+        ok = False
     if not ok:
-        r["kept"] = False; r["why"] = "readings disagree" if all(d is not None for d in diffs.values()) else "second reading not possible"
+        r["kept"] = False; r["why"] = r["drop"] if r.get("drop") else "readings disagree" if all(d is not None for d in diffs.values()) else "second reading not possible"
         print(f"{key:55s} dropped {diffs}"); continue
     ir = np.mean([r["r1"]["ir"], r["r2"]["ir"]], 0); th = np.mean([r["r1"][oc], r["r2"][oc]], 0)
     D = Recording.load(ROOT + 'recordings/' + plant, rig).depth_m(rig.depth_scale)

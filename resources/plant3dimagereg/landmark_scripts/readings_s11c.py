@@ -22,3 +22,10 @@ R["04philodendron/top_right_leaf_lower_right_corner#hs"] = {"cam": "hyperspectra
     "r1": {"ir": [385.0, 222.5], "hyperspectral": [216.0, 148.5]}, "r2": {"ir": [385.5, 222.5], "hyperspectral": [217.0, 149.5]}, "inward": [-0.7, -0.7]}
 R["04philodendron/front_leaf_apex_down#hs"] = {"cam": "hyperspectral",
     "r1": {"ir": [377.0, 374.5], "hyperspectral": [479.0, 170.0]}, "r2": {"ir": [376.5, 374.0], "hyperspectral": [480.5, 167.5]}, "inward": [-0.5, -0.87]}
+R["02leopard_lily/upper_left_leaf_tip#hs"] = {"cam": "hyperspectral",
+    "r1": {"ir": [221.5, 160.0], "hyperspectral": [122.5, 427.0]}, "r2": {"ir": [221.5, 160.0], "hyperspectral": [122.5, 427.5]}, "inward": [0.5, 0.87]}
+R["02leopard_lily/lower_right_leaf_tip#hs"] = {"cam": "hyperspectral",
+    "r1": {"ir": [438.0, 342.5], "hyperspectral": [430.5, 59.5]}, "r2": {"ir": [437.5, 342.0], "hyperspectral": [429.5, 56.5]}, "inward": [-0.9, -0.45]}
+# bottom tip: readings agree (IR 0.5, HS 2.1 px) but the hyperspectral tip ends 2-3 px from the image border: not kept
+R["02leopard_lily/bottom_leaf_tip#hs"] = {"cam": "hyperspectral", "drop": "hyperspectral tip 2-3 px from the image border",
+    "r1": {"ir": [258.5, 396.0], "hyperspectral": [507.5, 369.5]}, "r2": {"ir": [258.5, 396.5], "hyperspectral": [509.0, 371.0]}, "inward": [0.0, -1.0]}
