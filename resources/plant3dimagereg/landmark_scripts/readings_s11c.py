@@ -29,3 +29,5 @@ R["02leopard_lily/lower_right_leaf_tip#hs"] = {"cam": "hyperspectral",
 # bottom tip: readings agree (IR 0.5, HS 2.1 px) but the hyperspectral tip ends 2-3 px from the image border: not kept
 R["02leopard_lily/bottom_leaf_tip#hs"] = {"cam": "hyperspectral", "drop": "hyperspectral tip 2-3 px from the image border",
     "r1": {"ir": [258.5, 396.0], "hyperspectral": [507.5, 369.5]}, "r2": {"ir": [258.5, 396.5], "hyperspectral": [509.0, 371.0]}, "inward": [0.0, -1.0]}
+R["01grapevine/bottom_leaf_lowest_lobe_tip#hs"] = {"cam": "hyperspectral",
+    "r1": {"ir": [321.0, 336.5], "hyperspectral": [426.0, 255.5]}, "r2": {"ir": [320.5, 336.0], "hyperspectral": [427.0, 255.0]}, "inward": [0.0, -1.0]}
