@@ -10,7 +10,7 @@ from pathlib import Path; sys.path.insert(0, str(Path(__file__).resolve().parent
 from plantreg_gui.core.camera.rig import Rig
 from plantreg_gui.core.data.recording import Recording
 from plantreg_gui.core.rigfit.rigfit import check_landmark_depth
-from readings_s11c import R
+from readings_s11c import R, NAV, REJECTED
 ROOT = str(Path(__file__).resolve().parents[1]) + '/'
 rig = Rig.load(ROOT + 'rig_nominal.json')
 TOL = {"ir": 2.0, "thermal": 4.0, "hyperspectral": 4.0}
@@ -52,5 +52,5 @@ for key, r in R.items():
                           "note": f"s11c {name}: independent reader, two readings ({diffs['ir']:.1f} / {diffs[oc]:.1f} px apart), inward {step} px, depth {chk.z_m:.3f} m"})
     print(f"{key:55s} kept ir {np.round(uv_ir,2)} th {np.round(uv_th,2)} step {step} z {chk.z_m:.3f} diffs {diffs}")
 json.dump(out, open(ROOT + 'landmarks_independent_s11.json', 'w'), indent=1)
-json.dump({"reader": "s11-h23c", "protocol": __doc__, "readings": raw},
+json.dump({"reader": "s11-h23c", "protocol": __doc__, "navigation": NAV, "looked_at_not_read": REJECTED, "readings": raw},
           open(ROOT + 'landmark_scripts/eye_readings_s11c.json', 'w'), indent=1)

@@ -31,3 +31,17 @@ R["02leopard_lily/bottom_leaf_tip#hs"] = {"cam": "hyperspectral", "drop": "hyper
     "r1": {"ir": [258.5, 396.0], "hyperspectral": [507.5, 369.5]}, "r2": {"ir": [258.5, 396.5], "hyperspectral": [509.0, 371.0]}, "inward": [0.0, -1.0]}
 R["01grapevine/bottom_leaf_lowest_lobe_tip#hs"] = {"cam": "hyperspectral",
     "r1": {"ir": [321.0, 336.5], "hyperspectral": [426.0, 255.5]}, "r2": {"ir": [320.5, 336.0], "hyperspectral": [427.0, 255.0]}, "inward": [0.0, -1.0]}
+
+NAV = ("Crops: landmark_scripts/annotate_view.crop_view (thermal pad NaN so the per-crop stretch ignores it), infrared zoom "
+       "6-13, other camera zoom 3-8, no marks; the second reading on a fresh crop (other random offset, other zoom). "
+       "Centring: each image's own structure (side-by-side overviews, contour_points candidates), rig_nominal.json's "
+       "prediction, and an affine correction of that prediction fitted to this reader's own first kept pairs (10 px "
+       "residuals; navigation only). No fitted rig was loaded and no rig's prediction was drawn.")
+REJECTED = {
+ "01grapevine": "top-leaf notch at the stake (IR readings 3.5 px apart: the stake's shadow makes the vertex ambiguous); lowest lobe tip thermal (5.1 px apart along the blurred rounded margin, as the README's finding 6); right-leaf margin notch and petiole sinus (no matching thermal point); thermal margins blotchy",
+ "02leopard_lily": "central leaf tips (crossings; thermal at background temperature); upper-right and lower-right tips outside the thermal image; the bottom tip's hyperspectral tip 2-3 px from the image border",
+ "03areca_palm": "leaflet tips proposed by contour candidates (contour_points) matched by the corrected nominal prediction: all crossings of leaflets or cut by the thermal border",
+ "04philodendron": "front leaf apex thermal (readings 5.1/6.1 px apart: a blurred V); front-left leaf's lower corner, right leaf's corners, inner V-notches and a leaf gap (crossings or rounded); vein hub (not a point); the upper-right leaf's top edge",
+ "05boston_fern": "frond tips at the thermal image's lower border (ragged pinnae, no single point in the thermal image)",
+ "06weeping_fig": "a ring-like curled leaf near IR (262, 178) / thermal (378, 158) (no defined point at this zoom); gaps between leaves (bounded by different leaves); no leaf tip matched with confidence",
+}
