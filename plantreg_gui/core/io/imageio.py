@@ -598,6 +598,14 @@ def write_tiff(path: str | Path, img: np.ndarray) -> None:
         tifffile.imwrite(tmp, a, **kw)
 
 
+def _nonempty_dir(p: Path) -> bool:
+    try:
+        with os.scandir(p) as it:
+            return any(True for _ in it)
+    except OSError:
+        return False
+
+
 @contextmanager
 def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path]:
     """Build an output folder under a temporary name and move it into place at the end.
@@ -619,6 +627,11 @@ def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path
         yield tmp
         _publish(tmp, is_dir=True)
         with signals.deferred():
+            if not overwrite and _nonempty_dir(out):
+                # made by someone else while this run worked (checked empty at the start): not ours to remove
+                raise InputError("output folder was created and filled by someone else while plantreg worked; "
+                                 "it is left as it is and nothing was written (choose another, or allow "
+                                 "overwriting)", out)
             if os.path.lexists(out):
                 old = temp_beside(out, folder=True, suffix=".old")
                 os.replace(out, old / "x")
