@@ -257,3 +257,28 @@ def test_a_tiff_stack_of_one_page_is_that_page(tmp_path, shape):
     tifffile.imwrite(tmp_path / "t.tif", a)
     got = read_image(tmp_path / "t.tif")
     np.testing.assert_array_equal(got, a[0])
+
+
+# ---------------------------------------------------------------------- environment
+@pytest.mark.parametrize("encoding", ["ascii", "latin-1"])
+def test_non_ascii_paths_on_streams_that_cannot_show_them(tmp_path, encoding):
+    """``PYTHONIOENCODING=ascii`` (or an ASCII terminal, a latin-1 log): an output folder named
+    ``ausgabe_ä…`` was written, then printing its name raised UnicodeEncodeError (a traceback,
+    exit 1 for a complete result). Now the name is printed with an escape, exit 0; a refusal
+    naming such a path is one line."""
+    import os
+
+    rig, rec = _write_inputs(tmp_path)
+    out = tmp_path / "ausgabe_\u00e4\u2202"
+    env = dict(_env(), PYTHONIOENCODING=encoding)
+    r = subprocess.run([sys.executable, "-m", "plantreg_gui", "register", "--rig", str(rig), "--recording", str(rec),
+                        "--target", "ir", "--out", str(out), "--quiet"], env=env, capture_output=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert b"Traceback" not in r.stderr and (out / "summary.json").is_file()
+    assert b"ausgabe_" in r.stdout
+    bad = subprocess.run([sys.executable, "-m", "plantreg_gui", "register", "--rig", str(rig), "--recording",
+                          str(tmp_path / "r\u00e9c"), "--target", "ir", "--out", str(tmp_path / "o2"), "--quiet"],
+                         env=env, capture_output=True, timeout=300)
+    assert bad.returncode == 1 and b"Traceback" not in bad.stderr, bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1 and b"does not exist" in bad.stderr
+    assert not os.path.exists(tmp_path / "o2")

@@ -16,7 +16,7 @@ from pathlib import Path
 from .. import __version__, prefer_one_blas_thread
 
 prefer_one_blas_thread()  # before numpy is first imported (the subcommands import it)
-from ..core.errors import Cancelled, PlantregError, quiet_library_notes, show_path
+from ..core.errors import Cancelled, PlantregError, printable_streams, quiet_library_notes, show_path
 from ..core.io.paths import remember_reads
 from ..core import signals
 from ..core.signals import Terminated  # noqa: F401 - raised by a terminating signal (docs/errors.md)
@@ -155,10 +155,9 @@ def main(argv: list[str] | None = None) -> int:
               "/dev/null instead: >/dev/null)", file=sys.stderr)
         return 1
     quiet_library_notes()  # and in every child process (signals.child_init)
-    try:  # a file name that is not UTF-8 is printed as its own bytes (any locale), never a UnicodeEncodeError
-        sys.stdout.reconfigure(errors="surrogateescape")
-    except (AttributeError, ValueError):  # not a text stream of ours (captured in a test)
-        pass
+    # a file name that is not UTF-8 is printed as its own bytes, a character the streams' encoding
+    # lacks as an escape (any locale, PYTHONIOENCODING=ascii): never a UnicodeEncodeError
+    printable_streams()
     parser = build_parser(list(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     # the words of this command line, for provenance (sys.argv is someone else's when called in-process)

@@ -314,7 +314,10 @@ def write_outputs(
     keep: list[Path] = [Path(v) for k, v in (inputs or {}).items()
                         if isinstance(v, Path) or (k == "rig" and isinstance(v, str))]
     if recording is not None and recording.folder is not None:
-        keep += [Path(recording.folder), *map(Path, recording.paths.values())]
+        from ..data.recording import recording_inputs
+
+        # what registering it read, as `plantreg register` lists it (the manifest, ENVI data files)
+        keep += [Path(recording.folder), *map(Path, recording.paths.values()), *recording_inputs(recording.folder)]
     with claim_output(out, "output", folder=True, overwrite=overwrite, inputs=keep), \
             atomic_output_dir(out, overwrite) as tmp, Background() as background:
         ctx = ExportContext(tmp, result, rig, recording, cams, preview, tiff_codec, mosaic_tile, inputs, t_start,
