@@ -282,3 +282,14 @@ def test_non_ascii_paths_on_streams_that_cannot_show_them(tmp_path, encoding):
     assert bad.returncode == 1 and b"Traceback" not in bad.stderr, bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1 and b"does not exist" in bad.stderr
     assert not os.path.exists(tmp_path / "o2")
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["--version"], ["register", "--help"]])
+def test_help_that_cannot_be_written_is_not_exit_0(tmp_path, argv):
+    """argparse swallows an OS error writing its help (``--help >/dev/full`` exited 0 with no
+    help written): one line naming standard output, exit 1."""
+    with open("/dev/full", "w") as full:
+        r = subprocess.run([sys.executable, "-m", "plantreg_gui", *argv], env=_env(), stdout=full,
+                           stderr=subprocess.PIPE, text=True, timeout=120)
+    assert r.returncode == 1, r.stderr
+    assert r.stderr.strip() == "plantreg: error: cannot write to standard output (No space left on device)"
