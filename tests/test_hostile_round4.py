@@ -293,3 +293,46 @@ def test_help_that_cannot_be_written_is_not_exit_0(tmp_path, argv):
                            stderr=subprocess.PIPE, text=True, timeout=120)
     assert r.returncode == 1, r.stderr
     assert r.stderr.strip() == "plantreg: error: cannot write to standard output (No space left on device)"
+
+
+# ---------------------------------------------------------------------- plantreg-gui's command line
+_GUI = [sys.executable, "-c", "import sys; from plantreg_gui.gui.app import main; sys.exit(main())"]
+
+
+@pytest.mark.parametrize("extra, rc, words", [
+    (["--size", "0x0"], 2, ["--size", "0x0"]),  # a 0x0 window never drew: --screenshot waited for ever
+    (["--size", "100000x100000"], 2, ["--size"]),
+    (["--size", "-5x-5"], 2, ["--size"]),
+    (["--timeout", "nan"], 2, ["--timeout"]),
+    (["--timeout", "-1"], 2, ["--timeout"]),
+    (["--page", "99", "--calibrate-demo"], 2, ["--page", "99"]),  # silently page 7 before
+    (["--screenshot", ""], 2, ["--screenshot"]),
+], ids=["size0", "size_huge", "size_neg", "timeout_nan", "timeout_neg", "page99", "screenshot_empty"])
+def test_gui_options_out_of_range(tmp_path, extra, rc, words):
+    r = subprocess.run([*_GUI, *(["--screenshot", str(tmp_path / "s.png")] if "--screenshot" not in extra else []),
+                        *extra], env=_env(), capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert r.returncode == rc, r.stderr
+    assert "Traceback" not in r.stderr and r.stderr.strip().splitlines()[-1].startswith("plantreg-gui: error: ")
+    assert all(w in r.stderr for w in words), r.stderr
+    assert not (tmp_path / "s.png").exists()
+
+
+@pytest.mark.parametrize("target", ["rig", "image", "fifo", "folder"])
+def test_gui_screenshot_goes_through_the_output_check(tmp_path, target):
+    """``--screenshot`` over the rig replaced it with a PNG (and over an image of the recording);
+    onto a FIFO it blocked for ever; onto a folder Qt failed and "screenshot saved" was printed,
+    exit 0. Now refused before any window, naming the path."""
+    import os
+
+    rig, rec = _write_inputs(tmp_path)
+    shot = {"rig": rig, "image": rec / "rgb.png", "fifo": tmp_path / "s.png", "folder": tmp_path / "d.png"}[target]
+    if target == "fifo":
+        os.mkfifo(shot)
+    if target == "folder":
+        shot.mkdir()
+    before = _snapshot(tmp_path)
+    r = subprocess.run([*_GUI, "--rig", str(rig), "--recording", str(rec), "--screenshot", str(shot)], env=_env(),
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and str(shot) in r.stderr, r.stderr
+    assert _snapshot(tmp_path) == before
