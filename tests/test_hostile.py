@@ -725,35 +725,40 @@ def test_forged_headers_refused_under_a_memory_limit(tmp_path):
     assert "memory" not in r.stdout.lower() and "Traceback" not in r.stderr
 
 
-def _demo_argv(folder: Path) -> list[str]:
-    return [sys.executable, "-c", "import sys; from plantreg_gui.cli import main; sys.exit(main(sys.argv[1:]))",
-            "demo", str(folder), "--quiet"]
+def _demo_argv(folder: Path, hold: Path | None = None) -> list[str]:
+    """``plantreg demo FOLDER`` in a child. With ``hold``: the child creates that file and then
+    waits (60 s) the first time a file or folder of the output is made ready to be moved into
+    place (``imageio._publish``): a signal sent once ``hold`` exists arrives while the output is
+    being written, however loaded the machine (waiting for the temporary folder to appear and
+    sleeping a little lost that race three times in a row beside two busy CPU loops)."""
+    code = "import sys; from plantreg_gui.cli import main; sys.exit(main(sys.argv[1:]))"
+    if hold is not None:
+        code = (f"import time; from pathlib import Path; from plantreg_gui.core.io import imageio\n"
+                f"_publish = imageio._publish\n"
+                f"def _held(tmp, is_dir=False):\n"
+                f"    Path({str(hold)!r}).touch(); time.sleep(60); _publish(tmp, is_dir)\n"
+                f"imageio._publish = _held\n" + code)
+    return [sys.executable, "-c", code, "demo", str(folder), "--quiet"]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
 def test_signal_while_writing_leaves_nothing(tmp_path, sig):
     """SIGTERM (``timeout``), SIGHUP (a closed terminal) and SIGINT while the demo is being written:
     exit 128 + signal (130 for Ctrl-C), no DIR, no .part/.old beside it."""
-    out = tmp_path / "demo"
-    for attempt in range(3):
-        p = subprocess.Popen(_demo_argv(out), env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        t0 = time.monotonic()
-        while not list(tmp_path.glob(".demo.*.part")) and p.poll() is None and time.monotonic() - t0 < 120:
-            time.sleep(0.02)
-        assert p.poll() is None, "the demo ended before a signal could be sent"
-        time.sleep(0.05)
-        p.send_signal(sig)
-        _out, err = p.communicate(timeout=120)
-        if p.returncode == 0 and attempt < 2:
-            # the demo finished between the check and the signal (a loaded machine): a lost race,
-            # not a defect -- the complete output must then be there; try again
-            assert out.is_dir() and not list(tmp_path.glob(".demo.*"))
-            shutil.rmtree(out)
-            continue
-        break
+    work = tmp_path / "work"
+    work.mkdir()
+    out, hold = work / "demo", tmp_path / "writing"
+    p = subprocess.Popen(_demo_argv(out, hold), env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.monotonic()
+    while not hold.exists() and p.poll() is None and time.monotonic() - t0 < 300:
+        time.sleep(0.02)
+    assert p.poll() is None and hold.exists(), "the demo did not start writing"
+    assert list(work.glob(".demo.*.part"))  # the output is being written under its temporary name
+    p.send_signal(sig)
+    _out, err = p.communicate(timeout=120)
     assert p.returncode == 128 + sig, (p.returncode, err)
     assert "Traceback" not in err
-    assert list(tmp_path.iterdir()) == []
+    assert list(work.iterdir()) == []
 
 
 def _can_drop_privileges() -> str | None:

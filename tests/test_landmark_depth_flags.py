@@ -268,3 +268,52 @@ def test_no_landmark_on_the_plant_is_flagged(seed):
         P = np.array([float(x) for x in lm.note.split("[")[1].split("]")[0].split(",")])
         c = check_landmark_depth(depth, lm.depth_uv, rig.ground_z)
         assert c.status == "ok" and c.z_m == pytest.approx(rig.depth().to_cam(P[None])[0, 2], abs=0.01), lm.note
+
+
+@pytest.mark.parametrize("seed", [7, 19])
+def test_the_silhouette_fits_landmark_term_takes_the_same_depth_as_the_landmark_fit(world, seed):
+    """``--silhouette`` uses landmarks as a term of its fit: an edge click that reads the ground
+    must put its 3D point on the leaf (snapped) as the landmark fit does, or leave it out
+    with ``--no-snap-depth``; never at the ground's depth (the click's pixel value)."""
+    from plantreg_gui.core.rigfit.silhouette import landmark_points
+
+    rig, scene, rec = world
+    depth = rec.depth_m(rig.depth_scale)
+    edge, z_true = edge_landmark(rig, scene, depth, np.random.default_rng(seed))
+    u, v = edge.depth_uv.astype(int)
+    assert depth[v, u] - z_true > 0.05  # the click's own pixel reads the ground
+    X, ok = landmark_points(rig, depth, edge.depth_uv[None])
+    assert ok[0]
+    z_used = float(rig.depth().to_cam(X)[0, 2])
+    assert z_used == pytest.approx(check_landmark_depth(depth, edge.depth_uv, rig.ground_z).z_m, abs=1e-9)
+    assert abs(z_used - z_true) < 0.01  # on the leaf
+    _X, ok_off = landmark_points(rig, depth, edge.depth_uv[None], snap=False)
+    assert not ok_off[0]
+
+
+@pytest.mark.parametrize("seed", [3, 41])
+def test_the_page_summary_leaves_out_the_landmark_the_fit_set_aside(world, seed):
+    """A click paired with the wrong camera pixel (30 px off, known bad by construction) is set
+    aside by the robust fit; the page's residual summary of the current rig (shown once the rig
+    is nudged) is over the landmarks the fit used, as ``fit-rig`` reports, and says one was set
+    aside -- it must not carry the bad pair's 30 px into median and max."""
+    rig, scene, rec = world
+    rng = np.random.default_rng(seed)
+    truth = synthetic_landmarks(rig, scene, 14, 0.3, rng, sources=[CAM])
+    start = perturb_rig(rig, rng, rotation_deg=1.0, position_m=0.01, focal_rel=0.0, cameras=[CAM])
+    s = LandmarkSession(start, LandmarkSet(), {"plant": rec})
+    s.set_camera(CAM)
+    bad = 5
+    for i, lm in enumerate(truth):
+        uv = np.asarray(lm.cameras[CAM], float) + (np.array([30.0, 0.0]) if i == bad else 0.0)
+        s.add_point(lm.depth_uv, {CAM: uv}, lm.note)
+    res = s.fit()
+    assert [d["index"] for d in res.report["residuals"] if d["outlier"]] == [bad]
+    assert s.set_aside() == {("plant", bad, CAM)}
+    s.nudge("rotate", 0, 0.01)  # the report is no longer of the current rig: the page shows the summary
+    summ = s.summary()[CAM]
+    assert summ["n"] == len(truth) - 1 and summ["set_aside"] == 1
+    assert summ["max_px"] < 5.0  # the truth's clicks: 0.3 px noise plus a 0.01 deg nudge
+    # an edited point is no longer the one the fit set aside
+    s.points[bad].note = "read again"
+    assert s.set_aside() == set() and s.summary()[CAM]["n"] == len(truth)

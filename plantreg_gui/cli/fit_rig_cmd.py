@@ -175,7 +175,8 @@ def _silhouette(args: argparse.Namespace, fitted, recordings: list, by_folder: d
     from ..core.rigfit.silhouette import fit_rig_recordings
 
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
-    rig, srep = fit_rig_recordings(fitted, recordings, by_folder, progress=progress)
+    rig, srep = fit_rig_recordings(fitted, recordings, by_folder, progress=progress,
+                                    snap_depth=not args.no_snap_depth)
     report["silhouette"] = srep
     return rig, ("silhouette" if method == "start" else method + "+silhouette")
 

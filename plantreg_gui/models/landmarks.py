@@ -392,12 +392,37 @@ class LandmarkSession:
         rows, _rej = evaluate_landmarks(self.rig, self._recording_landmarks([self.recording_key]), [camera])
         return {d["index"]: d["residual_px"] for d in rows}
 
+    def set_aside(self) -> set[tuple[str, int, str]]:
+        """(recording, index, camera) of the landmarks the fit behind the current rig left out as
+        outliers: from this page's fit, else from the rig's calibration record (a rig fitted by
+        ``fit-rig``). A row counts only while its point still carries the note it was fitted with
+        (an edited point is no longer the one the fit set aside)."""
+        rep = self.report if self.report is not None else self.rig.extra.get("calibration")
+        rows = rep.get("residuals") if isinstance(rep, dict) else None
+        out: set[tuple[str, int, str]] = set()
+        for d in rows if isinstance(rows, list) else []:
+            if not (isinstance(d, dict) and d.get("outlier")):
+                continue
+            pts = self.landmarks.recordings.get(d.get("recording"))
+            i = d.get("index")
+            if pts and isinstance(i, int) and 0 <= i < len(pts) and pts[i].note == d.get("note", pts[i].note):
+                out.add((d["recording"], i, d.get("camera")))
+        return out
+
     def summary(self) -> dict[str, dict[str, Any]]:
-        """Per camera over every recording: ``n``, ``median_px``, ``p90_px``, ``max_px`` of the current rig."""
+        """Per camera over every recording: ``n``, ``median_px``, ``p90_px``, ``max_px`` of the
+        current rig, over the landmarks the fit used (as ``fit-rig`` reports them); ``set_aside``:
+        how many of the camera's landmarks the fit left out as outliers (:meth:`set_aside`)."""
         from ..core.rigfit.rigfit import _stats_by
 
         rows, _ = evaluate_landmarks(self.rig, self._recording_landmarks())
-        return _stats_by(rows, ("camera",)) if rows else {}
+        aside = self.set_aside()
+        for d in rows:
+            d["outlier"] = (d["recording"], d["index"], d["camera"]) in aside
+        out = _stats_by(rows, ("camera",)) if rows else {}
+        for c, v in out.items():
+            v["set_aside"] = sum(1 for d in rows if d["camera"] == c and d["outlier"])
+        return out
 
     def predicted(self, index: int, camera: str | None = None) -> np.ndarray | None:
         """Where the current rig puts point ``index``'s depth pixel in ``camera`` (2,), or None."""

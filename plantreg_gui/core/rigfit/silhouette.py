@@ -171,14 +171,17 @@ def outline_points(rig: Rig, depth_m: np.ndarray, mask: np.ndarray, inset_px: in
     return dcam.to_rig(X)
 
 
-def landmark_points(rig: Rig, depth_m: np.ndarray, depth_uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """3D points (N, 3) rig frame of depth-camera pixels ``depth_uv`` (N, 2) with the landmark
-    fit's robust depth (:func:`.rigfit.landmark_depth`); ``ok`` (N,) where a depth was found."""
-    from .rigfit import landmark_depth
+def landmark_points(rig: Rig, depth_m: np.ndarray, depth_uv: np.ndarray, snap: bool = True
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """3D points (N, 3) rig frame of depth-camera pixels ``depth_uv`` (N, 2) at the depth the
+    landmark fit gives them (:func:`.rigfit.check_landmark_depth`: a click that reads the ground
+    beside a leaf is snapped onto the leaf, or left out without ``snap``); ``ok`` (N,) where a
+    depth is used."""
+    from .rigfit import check_landmark_depth
 
     dcam = rig.depth()
     uv = np.asarray(depth_uv, np.float64).reshape(-1, 2)
-    z = np.array([landmark_depth(depth_m, p)[0] for p in uv]) if len(uv) else np.zeros(0)
+    z = np.array([check_landmark_depth(depth_m, p, rig.ground_z, snap).z_m for p in uv]) if len(uv) else np.zeros(0)
     ok = np.isfinite(z) & (z > 0)
     X = dcam.rays_cam(uv) * np.where(ok, z, 1.0)[:, None]
     return dcam.to_rig(X), ok
@@ -382,12 +385,13 @@ def fit_rig_silhouette(rig: Rig, views: dict[str, Sequence[SilhouetteView]], par
 
 def fit_rig_recordings(rig: Rig, recordings: Sequence[Any], landmarks: dict[str, Sequence[Any]] | None = None,
                        cameras: Sequence[str] | None = None, params: SilhouetteParams | None = None,
-                       progress: Reporter | None = None) -> tuple[Rig, dict[str, Any]]:
+                       progress: Reporter | None = None, snap_depth: bool = True) -> tuple[Rig, dict[str, Any]]:
     """:func:`fit_rig_silhouette` on loaded recordings (:class:`~.recording.Recording`).
 
     ``landmarks``: recording folder (resolved absolute path, str) -> its landmark points
     (:class:`~.landmarks.Landmark`), used as a term of the fit with their click uncertainty;
-    ``cameras``: default every camera but the depth camera that some recording has an image of."""
+    ``cameras``: default every camera but the depth camera that some recording has an image of;
+    ``snap_depth``: as ``fit-rig`` (a landmark reading the ground is snapped, else left out)."""
     progress = ensure_reporter(progress)
     p = params or SilhouetteParams()
     dcam = rig.depth()
@@ -408,7 +412,7 @@ def fit_rig_recordings(rig: Rig, recordings: Sequence[Any], landmarks: dict[str,
             v = SilhouetteView(key, X, signed_distance(source_plant_mask(rec.images[n], p.min_component)))
             mine = [lm for lm in pts if n in lm.cameras]
             if mine:
-                lX, ok = landmark_points(rig, depth_m, np.array([lm.depth_uv for lm in mine]))
+                lX, ok = landmark_points(rig, depth_m, np.array([lm.depth_uv for lm in mine]), snap_depth)
                 v.lm_X, v.lm_uv = lX[ok], np.array([lm.cameras[n] for lm in mine])[ok]
             views[n].append(v)
     return fit_rig_silhouette(rig, {n: v for n, v in views.items() if v}, p, progress.sub(0.2, 1.0))

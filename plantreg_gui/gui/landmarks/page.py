@@ -585,7 +585,8 @@ class LandmarkPage(QWidget):
                         "Residuals of the current rig (moved by hand since the report below):")
             for c, v in s.summary().items():
                 text.append(f"  {c:<16} n={v['n']:<4} median {v['median_px']:.2f} px   p90 {v['p90_px']:.2f} px   "
-                            f"max {v['max_px']:.2f} px")
+                            f"max {v['max_px']:.2f} px"
+                            + (f"   ({v['set_aside']} set aside by the fit as outliers)" if v.get("set_aside") else ""))
             if rep:
                 text.append("\nBefore the nudges:")
         if "per_camera" in rep:
