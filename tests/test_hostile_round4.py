@@ -336,3 +336,30 @@ def test_gui_screenshot_goes_through_the_output_check(tmp_path, target):
     assert r.returncode == 1, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and str(shot) in r.stderr, r.stderr
     assert _snapshot(tmp_path) == before
+
+
+# ---------------------------------------------------------------------- a full disk
+def _no_bytes_left():
+    """In the child: no byte can be written (a file-size limit of 0; a full disk behaves alike
+    for the lock file, which needs no block to be created but one to hold its text)."""
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0))
+
+
+def test_no_space_for_even_the_lock_names_the_output_and_leaves_nothing(tmp_path):
+    """On a full disk the lock file was created (no block needed), then writing its holder's
+    text failed: "plantreg: error: File too large" naming no file, and ``.n.json.plantreg-lock``
+    left behind. Now the lock is held without its text, and the write of the output fails naming
+    it; nothing is left."""
+    _write_inputs(tmp_path)
+    cmds = {"rig create": ["rig", "create", tmp_path / "n.json", "--depth-camera", "ir", "--camera",
+                           "ir=infrared,640x576,f=504,rot=0"],
+            "recording create": ["recording", "create", tmp_path / "nr", "--image", f"rgb={tmp_path / 'rec' / 'rgb.png'}"]}
+    for name, argv in cmds.items():
+        before = _snapshot(tmp_path)
+        r = _run(argv, tmp_path, preexec_fn=_no_bytes_left)
+        assert r.returncode == 1, (name, r.stderr)
+        assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+        assert ("n.json" in r.stderr or "recording.json" in r.stderr) and "File too large" in r.stderr, r.stderr
+        assert _snapshot(tmp_path) == before, name

@@ -137,8 +137,11 @@ class _FileLock:
             if not same:
                 os.close(fd)
                 continue
-            os.ftruncate(fd, 0)
-            os.write(fd, _holder_text(self.mode).encode())
+            try:  # who holds it, for the other run's message: on a full disk the lock is held without it
+                os.ftruncate(fd, 0)
+                os.write(fd, _holder_text(self.mode).encode())
+            except OSError:
+                pass
             self._fd = fd
             return
         raise InputError("could not take the output's lock (its file keeps being replaced)", self.out)  # pragma: no cover
