@@ -363,3 +363,22 @@ def test_no_space_for_even_the_lock_names_the_output_and_leaves_nothing(tmp_path
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
         assert ("n.json" in r.stderr or "recording.json" in r.stderr) and "File too large" in r.stderr, r.stderr
         assert _snapshot(tmp_path) == before, name
+
+
+def test_closed_standard_error(tmp_path):
+    """``2>&-``: batch died on ``sys.stderr.isatty()`` (a traceback nobody saw, exit 1, nothing
+    written) and register printed its progress lines into its results on stdout. Now stderr is
+    /dev/null for the run: batch registers (exit 0), register's stdout holds only its results."""
+    rig, rec = _write_inputs(tmp_path)
+    cmd = [sys.executable, "-m", "plantreg_gui"]
+
+    def closed(argv):
+        return subprocess.run(["bash", "-c", " ".join(f"'{a}'" for a in [*cmd, *map(str, argv)]) + " 2>&-"],
+                              env=_env(), capture_output=True, text=True, timeout=300)
+
+    b = closed(["batch", "--rig", rig, "--target", "ir", "--out", tmp_path / "bout", "--workers", "1", rec])
+    assert b.returncode == 0, b.stdout
+    assert (tmp_path / "bout" / "rec" / "summary.json").is_file() and "Traceback" not in b.stdout
+    r = closed(["register", "--rig", rig, "--recording", rec, "--target", "ir", "--out", tmp_path / "out"])
+    assert r.returncode == 0 and r.stdout.startswith("registered into"), r.stdout
+    assert "%]" not in r.stdout  # no progress line among the results

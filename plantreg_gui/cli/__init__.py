@@ -204,7 +204,30 @@ def _silence_stdio_out() -> None:
         pass
 
 
+def _open_standard_fds() -> None:
+    """A standard file descriptor closed when the program started (``2>&-``, ``<&-``) is opened on
+    /dev/null: else the first file opened takes its number, and whatever a library or a child
+    process writes to "standard error" lands in that file. A closed stderr is then /dev/null for
+    Python too (it was None: ``batch`` died on ``sys.stderr.isatty()`` with an invisible traceback,
+    exit 1; other commands printed progress into their results on stdout): the user discarded the
+    messages, the exit status still tells."""
+    for fd, flags in ((0, os.O_RDONLY), (1, os.O_WRONLY), (2, os.O_WRONLY)):
+        try:
+            os.fstat(fd)
+        except OSError:
+            try:
+                new = os.open(os.devnull, flags)
+                if new != fd:
+                    os.dup2(new, fd)
+                    os.close(new)
+            except OSError:  # pragma: no cover - no /dev/null
+                continue
+            if fd == 2 and sys.stderr is None:
+                sys.stderr = open(2, "w", closefd=False, errors="backslashreplace")
+
+
 def main(argv: list[str] | None = None) -> int:
+    _open_standard_fds()
     if sys.stdout is None:  # started with stdout closed (>&-): results could not be printed
         print("plantreg: error: standard output is closed; plantreg prints its results there (send them to "
               "/dev/null instead: >/dev/null)", file=sys.stderr)
