@@ -725,20 +725,51 @@ def test_forged_headers_refused_under_a_memory_limit(tmp_path):
     assert "memory" not in r.stdout.lower() and "Traceback" not in r.stderr
 
 
-def _demo_argv(folder: Path, hold: Path | None = None) -> list[str]:
-    """``plantreg demo FOLDER`` in a child. With ``hold``: the child creates that file and then
-    waits (60 s) the first time a file or folder of the output is made ready to be moved into
-    place (``imageio._publish``): a signal sent once ``hold`` exists arrives while the output is
-    being written, however loaded the machine (waiting for the temporary folder to appear and
-    sleeping a little lost that race three times in a row beside two busy CPU loops)."""
-    code = "import sys; from plantreg_gui.cli import main; sys.exit(main(sys.argv[1:]))"
-    if hold is not None:
-        code = (f"import time; from pathlib import Path; from plantreg_gui.core.io import imageio\n"
-                f"_publish = imageio._publish\n"
-                f"def _held(tmp, is_dir=False):\n"
-                f"    Path({str(hold)!r}).touch(); time.sleep(60); _publish(tmp, is_dir)\n"
-                f"imageio._publish = _held\n" + code)
-    return [sys.executable, "-c", code, "demo", str(folder), "--quiet"]
+#: ``python -c HELD ARGS...`` runs ``plantreg ARGS...`` whose first output made ready to be moved
+#: into place (``imageio._publish``, on whichever thread) creates the file ``$PLANTREG_TEST_HOLD`` and
+#: waits there (up to 120 s) for a terminating signal: a signal sent once that file exists arrives
+#: while the output is being written, however loaded the machine. (Waiting for the temporary
+#: output to appear and signalling then lost that race to the run, three and five tries in a row,
+#: beside two busy CPU loops.)
+HELD = """
+import os, sys, threading, time
+from pathlib import Path
+from plantreg_gui.core import signals
+from plantreg_gui.core.io import imageio
+from plantreg_gui.cli import main
+
+hold, publish, once = Path(os.environ["PLANTREG_TEST_HOLD"]), imageio._publish, threading.Lock()
+
+def held(tmp, is_dir=False):
+    if once.acquire(blocking=False):
+        hold.touch()
+        end = time.monotonic() + 120
+        while time.monotonic() < end and signals.terminating() is None:
+            time.sleep(0.01)
+        signals.check()  # on a worker thread the handler (main thread) only marks the process ending
+    publish(tmp, is_dir)
+
+imageio._publish = held
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def signal_while_held(args: list[str], hold: Path, sig: int, group: bool = False) -> tuple[subprocess.Popen, str]:
+    """Run ``plantreg ARGS`` (:data:`HELD`), send ``sig`` (to its process group with ``group``) once
+    it holds at its first output, and return the process and its stderr."""
+    env = {**_env(), "PLANTREG_TEST_HOLD": str(hold)}
+    p = subprocess.Popen([sys.executable, "-c", HELD, *args], env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, start_new_session=group)
+    t0 = time.monotonic()
+    while not hold.exists() and p.poll() is None and time.monotonic() - t0 < 600:
+        time.sleep(0.02)
+    assert p.poll() is None and hold.exists(), ("the run did not reach its first output", p.poll())
+    if group:
+        os.killpg(p.pid, sig)
+    else:
+        p.send_signal(sig)
+    _out, err = p.communicate(timeout=300)
+    return p, err
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
@@ -747,15 +778,8 @@ def test_signal_while_writing_leaves_nothing(tmp_path, sig):
     exit 128 + signal (130 for Ctrl-C), no DIR, no .part/.old beside it."""
     work = tmp_path / "work"
     work.mkdir()
-    out, hold = work / "demo", tmp_path / "writing"
-    p = subprocess.Popen(_demo_argv(out, hold), env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    t0 = time.monotonic()
-    while not hold.exists() and p.poll() is None and time.monotonic() - t0 < 300:
-        time.sleep(0.02)
-    assert p.poll() is None and hold.exists(), "the demo did not start writing"
-    assert list(work.glob(".demo.*.part"))  # the output is being written under its temporary name
-    p.send_signal(sig)
-    _out, err = p.communicate(timeout=120)
+    out = work / "demo"
+    p, err = signal_while_held(["demo", str(out), "--quiet"], tmp_path / "writing", sig)
     assert p.returncode == 128 + sig, (p.returncode, err)
     assert "Traceback" not in err
     assert list(work.iterdir()) == []

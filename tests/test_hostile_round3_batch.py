@@ -25,7 +25,7 @@ from pathlib import Path
 import pytest
 
 from plantreg_gui import cli
-from test_hostile import _env, _no_leftovers, _write_inputs, tiny_session  # noqa: F401 - a fixture
+from test_hostile import _env, _no_leftovers, _write_inputs, signal_while_held, tiny_session  # noqa: F401 - a fixture
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANTREG = [sys.executable, "-m", "plantreg_gui"]
@@ -307,15 +307,18 @@ def _register_cmd(rig, rec, out) -> list[str]:
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGQUIT, signal.SIGUSR1, signal.SIGALRM],
                          ids=lambda s: signal.Signals(s).name)
 def test_signal_to_register_while_it_writes_leaves_nothing(two_recordings, tmp_path, sig):
-    """SIGTERM, SIGQUIT, SIGUSR1 and SIGALRM to register's process group the moment its hidden
-    ``.out.XXXX.part`` appears: exit 128 + signal, no OUT, nothing hidden beside it (SIGQUIT,
-    SIGUSR1 and SIGALRM used to end it on the spot, leaving ``.out.XXXX.part``)."""
+    """SIGTERM, SIGQUIT, SIGUSR1 and SIGALRM to register's process group while it writes (held at
+    its first output, :data:`test_hostile.HELD`): exit 128 + signal, no OUT, nothing hidden beside it
+    (SIGQUIT, SIGUSR1 and SIGALRM used to end it on the spot, leaving ``.out.XXXX.part``)."""
     rig, recs = two_recordings
-    out = tmp_path / "out"
-    p, err = _signal_while_writing(_register_cmd(rig, recs[0], out), tmp_path, ".out.*", out, sig)
+    work = tmp_path / "work"
+    work.mkdir()
+    out = work / "out"
+    p, err = signal_while_held(_register_cmd(rig, recs[0], out)[len(PLANTREG):], tmp_path / "writing", sig,
+                               group=True)
     assert p.returncode == 128 + sig, (p.returncode, err)
     assert "Traceback" not in err and "core dumped" not in err
-    assert sorted(x.name for x in tmp_path.iterdir()) == [], list(tmp_path.iterdir())
+    assert sorted(x.name for x in work.iterdir()) == [], list(work.iterdir())
 
 
 def test_cpu_time_limit_reached_while_writing_leaves_nothing(two_recordings, tmp_path):
