@@ -16,7 +16,7 @@ from pathlib import Path
 from .. import __version__, prefer_one_blas_thread
 
 prefer_one_blas_thread()  # before numpy is first imported (the subcommands import it)
-from ..core.errors import Cancelled, PlantregError, quiet_library_notes, show_path
+from ..core.errors import Cancelled, PlantregError, printable_streams, quiet_library_notes, show_path
 from ..core.io.paths import remember_reads
 from ..core import signals
 from ..core.signals import Terminated  # noqa: F401 - raised by a terminating signal (docs/errors.md)
@@ -149,18 +149,102 @@ def _memory_import_error(e: ImportError) -> str | None:
     return None
 
 
+class _RecordingStdout:
+    """``sys.stdout`` while argparse runs: argparse swallows an OS error writing its help or
+    version (``--help >/dev/full`` ended with exit 0 and no help); this remembers it."""
+
+    def __init__(self, stream):
+        self._stream, self.error = stream, None
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except OSError as e:
+            self.error = self.error or e
+            raise
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except OSError as e:
+            self.error = self.error or e
+            raise
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+def _after_argparse(rc: int, error: OSError | None) -> int:
+    """``rc`` once argparse's text (help, version) is flushed to standard output; a reader that
+    went away is SIGPIPE's status, a write error (``--help >/dev/full``) one line and exit 1 (the
+    help was lost: not 0)."""
+    if error is None:
+        try:
+            sys.stdout.flush()
+        except OSError as e:
+            error = e
+    if isinstance(error, BrokenPipeError):
+        _silence_stdio()
+        return 128 + signal.SIGPIPE
+    if error is not None:
+        _silence_stdio_out()
+        print(f"plantreg: error: cannot write to standard output ({error.strerror or error})", file=sys.stderr)
+        return 1
+    return rc
+
+
+def _silence_stdio_out() -> None:
+    """Point stdout at /dev/null after a write error on it, so the interpreter's flush at exit does
+    not report it again."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def _open_standard_fds() -> None:
+    """A standard file descriptor closed when the program started (``2>&-``, ``<&-``) is opened on
+    /dev/null: else the first file opened takes its number, and whatever a library or a child
+    process writes to "standard error" lands in that file. A closed stderr is then /dev/null for
+    Python too (it was None: ``batch`` died on ``sys.stderr.isatty()`` with an invisible traceback,
+    exit 1; other commands printed progress into their results on stdout): the user discarded the
+    messages, the exit status still tells."""
+    for fd, flags in ((0, os.O_RDONLY), (1, os.O_WRONLY), (2, os.O_WRONLY)):
+        try:
+            os.fstat(fd)
+        except OSError:
+            try:
+                new = os.open(os.devnull, flags)
+                if new != fd:
+                    os.dup2(new, fd)
+                    os.close(new)
+            except OSError:  # pragma: no cover - no /dev/null
+                continue
+            if fd == 2 and sys.stderr is None:
+                sys.stderr = open(2, "w", closefd=False, errors="backslashreplace")
+
+
 def main(argv: list[str] | None = None) -> int:
+    _open_standard_fds()
     if sys.stdout is None:  # started with stdout closed (>&-): results could not be printed
         print("plantreg: error: standard output is closed; plantreg prints its results there (send them to "
               "/dev/null instead: >/dev/null)", file=sys.stderr)
         return 1
     quiet_library_notes()  # and in every child process (signals.child_init)
-    try:  # a file name that is not UTF-8 is printed as its own bytes (any locale), never a UnicodeEncodeError
-        sys.stdout.reconfigure(errors="surrogateescape")
-    except (AttributeError, ValueError):  # not a text stream of ours (captured in a test)
-        pass
+    # a file name that is not UTF-8 is printed as its own bytes, a character the streams' encoding
+    # lacks as an escape (any locale, PYTHONIOENCODING=ascii): never a UnicodeEncodeError
+    printable_streams()
     parser = build_parser(list(sys.argv[1:] if argv is None else argv))
-    args = parser.parse_args(argv)
+    stdout, sys.stdout = sys.stdout, _RecordingStdout(sys.stdout)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help, --version, a usage error: what argparse printed must reach its reader
+        return _after_argparse(int(e.code) if isinstance(e.code, int) else (0 if e.code is None else 2),
+                               sys.stdout.error)
+    finally:
+        sys.stdout = stdout
     # the words of this command line, for provenance (sys.argv is someone else's when called in-process)
     args.argv = list(sys.argv[1:] if argv is None else argv)
     # SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGALRM, SIGXCPU ... unwind like Ctrl-C (core/signals.py)

@@ -93,7 +93,7 @@ class _Progress:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..core.io.lock import output_lock
+    from ..core.io.lock import claim_output
     from ..core.io.paths import check_output_location
     from ..core.pipeline import batch, batch_guard
     from .register_cmd import load_rig_for_target, output_options, registration_params
@@ -107,10 +107,12 @@ def run(args: argparse.Namespace) -> int:
     out = args.out.absolute()
     jobs = batch.plan(batch.expand_inputs(args.recordings), out)  # name clashes: refused before any work
     # OUT is written into (one folder per recording), never replaced as a whole
-    check_output_location(out, "output", folder=True, into=True, inputs=[rig_path] + [j.recording for j in jobs])
+    inputs = [rig_path] + [j.recording for j in jobs]
+    check_output_location(out, "output", folder=True, into=True, inputs=inputs)  # before the scheduler's handshake
     if args.scheduler:  # before OUT exists: a wrong address leaves nothing behind
         batch_guard.check_scheduler(args.scheduler)
-    with output_lock(out, what="batch output folder", into=True):  # a second run writing OUT meanwhile is refused
+    # checked again and locked: a second run writing OUT meanwhile is refused
+    with claim_output(out, "batch output folder", folder=True, into=True, inputs=inputs):
         made = not os.path.lexists(out)
         out.mkdir(parents=True, exist_ok=True)
         try:

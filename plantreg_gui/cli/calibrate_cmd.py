@@ -112,7 +112,9 @@ def run(args: argparse.Namespace) -> int:
     from ..core.calibration.calibrate import MAX_RMS_PX, quality_problems
     from ..core.calibration.metrics import empty_depth_maps
     from ..core.calibration.report import calibrated_rig, report_files, run_session, write_calibration
-    from ..core.io.lock import output_lock
+    from contextlib import ExitStack
+
+    from ..core.io.lock import claim_output
     from ..core.io.paths import check_output_location
     from ..core.progress import Reporter
 
@@ -134,9 +136,12 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"--out and --report would write the same file ({f}); choose other names", args.out)
         outputs[f.absolute()] = "--report" if f == args.report else f"--report's table {f.name}"
     for f, what in outputs.items():
-        if f == args.report.absolute() or f == args.out.absolute() or os.path.lexists(f):
+        if f != args.report.absolute() and f != args.out.absolute() and os.path.lexists(f):
             check_output_location(f, what, overwrite=args.overwrite, inputs=inputs)
-    with output_lock(args.out, args.report, what="calibration output"):  # one run at a time (the tables follow the report)
+    with ExitStack() as claims:  # rig and report checked and locked, one run at a time (the tables follow the report)
+        for f in sorted({args.out.absolute(), args.report.absolute()}):
+            claims.enter_context(claim_output(f, outputs[f], overwrite=args.overwrite, inputs=inputs,
+                                              lock_what="calibration output"))
         empty, every = empty_depth_maps(session)
         if every and len(empty) == len(every):
             raise InputError(f"none of the session's {len(every)} depth maps has a valid pixel (all 0 or NaN), e.g. "

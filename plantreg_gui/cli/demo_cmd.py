@@ -36,13 +36,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..core.synthetic import write_demo
 
-    from ..core.io.lock import output_lock
-    from ..core.io.paths import check_output_location
+    from ..core.io.lock import claim_output
 
     d = args.dir
-    check_output_location(d, "demo folder", folder=True, overwrite=args.overwrite)
     t0 = time.perf_counter()
-    with output_lock(d, what="demo folder"):
+    with claim_output(d, "demo folder", folder=True, overwrite=args.overwrite):
         paths = write_demo(args.dir, size=args.size, seed=args.seed, progress=StderrProgress(args.quiet),
                            overwrite=args.overwrite, clean=args.clean)
     print(f"wrote the synthetic demo to {d} in {time.perf_counter() - t0:.1f} s:")

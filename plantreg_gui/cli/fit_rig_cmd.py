@@ -66,13 +66,14 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def check_output_rig(out: Path, overwrite: bool, inputs: list[Path] | None = None) -> None:
-    """Refuse an output rig path before any work (``fit-rig``, ``rig create``): the one output
-    check (:func:`~..core.io.paths.check_output_location`; docs/errors.md, "Paths, names and
-    outputs") with the command's ``inputs``. The rig is then written atomically by :meth:`Rig.save`."""
-    from ..core.io.paths import check_output_location
+def claim_output_rig(out: Path, overwrite: bool, inputs: list[Path] | None = None):
+    """Take an output rig path before any work (``fit-rig``, ``rig create``): the one output
+    check and lock (:func:`~..core.io.lock.claim_output`; docs/errors.md, "Paths, names and
+    outputs") with the command's ``inputs``, as a context. The rig is then written atomically by
+    :meth:`Rig.save`."""
+    from ..core.io.lock import claim_output
 
-    check_output_location(out, "output rig", overwrite=overwrite, inputs=list(inputs or []))
+    return claim_output(out, "output rig", overwrite=overwrite, inputs=list(inputs or []))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -81,7 +82,6 @@ def run(args: argparse.Namespace) -> int:
     from ..core.camera.rig import Rig
     from ..core.camera.record import landmark_record
     from ..core.data.recording import recording_inputs
-    from ..core.io.lock import output_lock
     from ..core.rigfit.rigfit import fit_rig_from_file, format_report, keep_not_worse, parse_free, parse_priors
 
     out: Path = args.out
@@ -101,8 +101,7 @@ def run(args: argparse.Namespace) -> int:
     # the output, before the fit: never the start rig, the landmarks or a file of their recordings
     reads = [f for key in landmarks.recordings for f in recording_inputs(landmarks.folder(key))]
     reads += [f for folder in args.recording for f in recording_inputs(folder)]
-    check_output_rig(out, args.overwrite, [args.rig, args.landmarks, *reads])
-    with output_lock(out, what="output rig"):  # a second run writing RIG meanwhile is refused
+    with claim_output_rig(out, args.overwrite, [args.rig, args.landmarks, *reads]):  # checked, then locked
         if landmarks.count() > 0:
             result = fit_rig_from_file(rig, landmarks, free=free, priors=priors, cameras=fit_cams,
                                        max_median_px=args.max_median, snap_depth=not args.no_snap_depth)

@@ -40,8 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run_create(args: argparse.Namespace) -> int:
     from ..core.io.imageio import atomic_write_text, read_image
-    from ..core.io.lock import output_lock
-    from ..core.io.paths import check_output_location
+    from ..core.io.lock import claim_output
     from ..core.data.recording import MANIFEST, manifest_entries
 
     folder: Path = args.dir
@@ -76,8 +75,7 @@ def run_create(args: argparse.Namespace) -> int:
     if os.path.lexists(folder) and not folder.is_dir():
         raise InputError("recording folder is a file, not a folder", folder)
     inputs = [*images.values(), *([args.depth] if args.depth is not None else [])]
-    check_output_location(manifest, MANIFEST, overwrite=args.overwrite, inputs=inputs)
-    with output_lock(manifest, what=MANIFEST):
+    with claim_output(manifest, MANIFEST, overwrite=args.overwrite, inputs=inputs):
         # read every file now: a recording that cannot be read later is no use
         for name, f in images.items():
             read_image(f)

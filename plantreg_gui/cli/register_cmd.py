@@ -143,8 +143,8 @@ def registration_params(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     from .. import cli
     from ..core.data.recording import recording_inputs
-    from ..core.io.lock import output_lock
-    from ..core.io.paths import check_output_location, resolve
+    from ..core.io.lock import claim_output
+    from ..core.io.paths import resolve
     from ..core.pipeline.pipeline import register_recording
     from ..core.registration.cases import Area, Case
 
@@ -156,10 +156,10 @@ def run(args: argparse.Namespace) -> int:
     # fail before the long work, not after it: the output location (free or --overwrite, not an
     # input, writable), then the recording (names, then every image's header and size)
     recording = resolve(args.recording, "recording folder")
-    check_output_location(out, "output", folder=True, overwrite=args.overwrite,
-                          inputs=[rig_path, *recording_inputs(recording)])
     progress = Reporter(cli.StderrProgress(quiet=args.quiet))
-    with output_lock(out):  # a second run writing OUT meanwhile is refused (core/io/lock.py)
+    # checked, then locked (a second run writing OUT, or inside it, meanwhile is refused: core/io/lock.py)
+    with claim_output(out, "output", folder=True, overwrite=args.overwrite,
+                      inputs=[rig_path, *recording_inputs(recording)]):
         result = register_recording(rig, args.recording, args.target, out, params, options, overwrite=args.overwrite,
                                     inputs={"rig": rig_path.resolve(), "recording": recording,
                                             "command": _command_line(args)}, progress=progress).result

@@ -44,11 +44,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run_create(args: argparse.Namespace) -> int:
     from ..core.rigfit.start import create_rig, parse_camera_spec
-    from ..core.io.lock import output_lock
-    from .fit_rig_cmd import check_output_rig
+    from .fit_rig_cmd import claim_output_rig
 
     specs = [parse_camera_spec(t) for t in args.camera]
-    check_output_rig(args.out, args.overwrite, [s.kinect for s in specs if s.kinect is not None])
+    kinect = [s.kinect for s in specs if s.kinect is not None]
     roi = None
     if args.roi is not None:
         try:
@@ -58,7 +57,7 @@ def run_create(args: argparse.Namespace) -> int:
         if len(v) != 6:
             raise InputError(f"--roi takes six numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX in metres, got '{args.roi}'")
         roi = (v[:3], v[3:])
-    with output_lock(args.out, what="output rig"):
+    with claim_output_rig(args.out, args.overwrite, kinect):
         rig, warnings = create_rig(specs, args.depth_camera, args.depth_scale, roi)
         rig.save(args.out)
     for c in rig.cameras:

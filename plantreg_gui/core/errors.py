@@ -42,6 +42,40 @@ def show_path(path: str | Path) -> str:
     return re.sub(r"[\x00-\x1f\x7f]", lambda m: repr(m.group())[1:-1], str(path))
 
 
+#: The error handler of the command line's standard streams (:func:`printable_streams`).
+STREAM_ERRORS = "plantreg.names"
+
+
+def _names_as_bytes_or_escapes(e: UnicodeError):
+    """A file name that is not UTF-8 (Python holds its bytes as surrogates) is written as its own
+    bytes; any other character the stream's encoding lacks (``ä`` with ``PYTHONIOENCODING=ascii``
+    or an ASCII terminal) as a backslash escape, never a ``UnicodeEncodeError`` after the outputs
+    are written."""
+    if not isinstance(e, UnicodeEncodeError):
+        raise e
+    text = e.object[e.start:e.end]
+    if all(0xDC80 <= ord(c) <= 0xDCFF for c in text):
+        return bytes(ord(c) - 0xDC00 for c in text), e.end
+    return text.encode("ascii", "backslashreplace").decode("ascii"), e.end
+
+
+def printable_streams() -> None:
+    """Standard output and error of a command-line process: every character printable whatever
+    their encoding (see :func:`_names_as_bytes_or_escapes`)."""
+    import codecs
+    import sys
+
+    try:
+        codecs.lookup_error(STREAM_ERRORS)
+    except LookupError:
+        codecs.register_error(STREAM_ERRORS, _names_as_bytes_or_escapes)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.reconfigure(errors=STREAM_ERRORS)
+        except (AttributeError, ValueError):  # closed, or not a text stream of ours (captured in a test)
+            pass
+
+
 def said_once(path: str | Path | None, detail: str, within: str | Path) -> str:
     """An error about ``path`` in a line that names the folder ``within`` already (a failed batch
     row names its recording): a file inside it is named relative to it (``thermal.tif: ...``),

@@ -281,18 +281,42 @@ def check_translation(t: np.ndarray, key: str) -> None:
                          "(t is in metres: millimetres by mistake?)")
 
 
-#: depth.scale (metres per depth unit): 1 for depth maps in metres; more is not a depth map.
+#: depth.scale (metres per depth unit): 1 for depth maps in metres; more is not a depth map. At
+#: least a micrometre per unit (65535 units then span 6.5 cm): 1e-300 made every depth 0 m and
+#: was reported as "no surface inside the region of interest" against the depth map.
 MAX_DEPTH_SCALE = 1000.0
+MIN_DEPTH_SCALE = 1e-6
+
+
+def bounded(v: Any, key: str, lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> float:
+    """The one check of a number that has a physical range: a number (not a boolean or a
+    string), finite, ``lo`` <= v <= ``hi`` (``lo_open``: ``lo`` < v). Denormal, vanishing or
+    astronomical values of a well-typed key are named here, not later as what they caused."""
+    if not is_number(v):
+        raise ValueError(f"{key} must be a number{f' ({unit})' if unit else ''}, got {show(v)}")
+    f = float(v)
+    if not (f > lo if lo_open else f >= lo) or not f <= hi:  # NaN fails too
+        low = f"above {lo:g}" if lo_open else f"at least {lo:g}"
+        raise ValueError(f"{key} must be {low} and at most {hi:g}{f' ({unit})' if unit else ''}, got {show(v)}")
+    return f
 
 
 def depth_scale(v: Any, key: str) -> float:
     """The one check of a depth scale (metres per depth unit) wherever one is given: the rig's
     ``depth.scale``, a session's, a recording's ``depth_scale`` and the ``--depth-scale`` options:
-    a number in (0, :data:`MAX_DEPTH_SCALE`]."""
-    if not is_number(v):
-        raise ValueError(f"{key} must be a number (metres per depth unit), got {show(v)}")
-    f = float(v)
-    if not (0 < f <= MAX_DEPTH_SCALE):  # NaN fails too
-        raise ValueError(f"{key} must be positive and at most {MAX_DEPTH_SCALE:g} (metres per depth unit), "
-                         f"got {show(v)}")
-    return f
+    a number in [:data:`MIN_DEPTH_SCALE`, :data:`MAX_DEPTH_SCALE`]."""
+    return bounded(v, key, MIN_DEPTH_SCALE, MAX_DEPTH_SCALE, "metres per depth unit")
+
+
+#: Optional per-camera keys of a rig in pixels (``core/registration/mixed.py``): the optical blur
+#: (Gaussian sigma) and the expected registration error. Up to :data:`MAX_CAMERA_PX`: a blur of
+#: 1e308 px overflowed the mixed-pixel search; -1 or NaN were silently taken as 0.
+CAMERA_PX_KEYS = ("blur_px", "registration_px")
+MAX_CAMERA_PX = 1000.0
+
+
+def camera_px_keys(d: dict, key: str) -> None:
+    """Check the optional pixel keys (:data:`CAMERA_PX_KEYS`) of a rig's camera entry ``d``."""
+    for k in CAMERA_PX_KEYS:
+        if k in d and d[k] is not None:
+            bounded(d[k], f"{key}.{k}", 0.0, MAX_CAMERA_PX, "pixels")

@@ -16,7 +16,37 @@ from .. import __version__, prefer_one_blas_thread
 prefer_one_blas_thread()  # before numpy is first imported (the views and the core import it)
 
 
+#: Window sides ``--size`` accepts, pixels: smaller cannot show a page (0x0 never drew, so a
+#: ``--screenshot`` waited for ever); larger than any screen or Xvfb framebuffer.
+MIN_SIDE, MAX_SIDE = 200, 16384
+#: Wizard pages (``--page``).
+PAGES = 7
+
+
+def window_size(text: str) -> tuple[int, int]:
+    """``--size WxH`` -> (W, H), each a whole number from :data:`MIN_SIDE` to :data:`MAX_SIDE`."""
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT, e.g. 1500x950, got '{text}'") from None
+    if not (MIN_SIDE <= w <= MAX_SIDE and MIN_SIDE <= h <= MAX_SIDE):
+        raise argparse.ArgumentTypeError(f"width and height must be {MIN_SIDE} to {MAX_SIDE} pixels, got '{text}'")
+    return w, h
+
+
+def wizard_page(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+    if not 1 <= n <= PAGES:
+        raise argparse.ArgumentTypeError(f"must be a page from 1 to {PAGES}, got '{text}'")
+    return n
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from ..cli import nonempty_path, positive_float
+
     p = argparse.ArgumentParser(prog="plantreg-gui", description="plantreg desktop application")
     p.add_argument("--version", action="version", version=f"plantreg {__version__}")
     g = p.add_argument_group("registration workspace")
@@ -30,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     g = p.add_argument_group("calibration wizard")
     g.add_argument("--calibrate-demo", action="store_true", help="open the synthetic calibration session of the demo")
     g.add_argument("--session", type=Path, help="open a capture session folder in the calibration wizard")
-    g.add_argument("--page", type=int, help="wizard page to show (1-7); earlier pages' work is run first")
+    g.add_argument("--page", type=wizard_page, help="wizard page to show (1-7); earlier pages' work is run first")
     g = p.add_argument_group("landmark page")
     g.add_argument("--landmarks", type=Path, help="open the landmark page on this landmarks file (with --rig; "
                    "--recording adds a recording folder)")
@@ -42,10 +72,32 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--uninstall-desktop", action="store_true",
                    help="remove what --install-desktop added, then exit")
     g = p.add_argument_group("automation")
-    g.add_argument("--screenshot", type=Path, help="save a PNG of the window once the work is done, then exit")
-    g.add_argument("--size", default="1500x950", help="window size WxH (default 1500x950)")
-    g.add_argument("--timeout", type=float, default=300.0, help="seconds to wait for work before a screenshot")
+    g.add_argument("--screenshot", type=nonempty_path, help="save a PNG of the window once the work is done, then exit")
+    g.add_argument("--size", type=window_size, default=(1500, 950), metavar="WxH",
+                   help=f"window size WxH, {MIN_SIDE} to {MAX_SIDE} pixels a side (default 1500x950)")
+    g.add_argument("--timeout", type=positive_float, default=300.0,
+                   help="seconds to wait for work before a screenshot (a positive number)")
     return p
+
+
+def _screenshot_problem(args: argparse.Namespace) -> str | None:
+    """Why ``--screenshot`` cannot be written (None: it can): the shared output check
+    (``core/io/paths.py``), with the files the options open as inputs (a screenshot over the rig
+    replaced it with a PNG; over a FIFO it waited for ever; into a read-only folder it said
+    "saved")."""
+    from ..core.errors import PlantregError
+    from ..core.io.paths import check_output_location
+
+    try:
+        inputs = [p for p in (args.rig, args.recording, args.session, args.landmarks) if p is not None]
+        if args.recording is not None:
+            from ..core.data.recording import recording_inputs
+
+            inputs += recording_inputs(args.recording)
+        check_output_location(args.screenshot, "screenshot", overwrite=True, inputs=inputs)
+    except PlantregError as e:
+        return str(e)
+    return None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -57,11 +109,12 @@ def main(argv: list[str] | None = None) -> int:
         from ..desktop import main as desktop_main
 
         return desktop_main("install" if args.install_desktop else "uninstall")
-    try:
-        w, h = (int(x) for x in args.size.lower().split("x"))
-    except ValueError:
-        print(f"plantreg-gui: error: --size must be WIDTHxHEIGHT, got '{args.size}'", file=sys.stderr)
-        return 2
+    w, h = args.size
+    if args.screenshot is not None:  # the output check every command uses, before any window
+        problem = _screenshot_problem(args)
+        if problem:
+            print(f"plantreg-gui: error: {problem}", file=sys.stderr)
+            return 1
     os.environ.setdefault("QT_API", "pyside6")
     from PySide6.QtWidgets import QApplication
 

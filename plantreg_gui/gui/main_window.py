@@ -12,6 +12,7 @@ from PySide6.QtGui import QIcon
 from PySide6.QtWidgets import QApplication, QMainWindow, QMenu, QTabWidget, QToolButton
 
 from .. import __version__, resources
+from ..core.errors import PlantregError
 
 
 class MainWindow(QMainWindow):
@@ -108,8 +109,15 @@ class MainWindow(QMainWindow):
             if now - state["idle_since"] < 0.5 and now - t0 < timeout:
                 return
             timer.stop()
-            self.save_screenshot(path)
-            errors = SHOWN_ERRORS[n_errors:]
+            errors = []
+            try:
+                self.save_screenshot(path)
+            except (OSError, PlantregError) as e:  # a full disk, a folder made read-only meanwhile
+                from ..core.errors import show_path
+
+                where = f"{show_path(e.filename)}: " if isinstance(e, OSError) and e.filename else ""
+                errors.append(("Screenshot not saved", f"{where}{e.strerror if isinstance(e, OSError) else e}"))
+            errors = SHOWN_ERRORS[n_errors:] + errors
             for title, msg in errors:  # shown in a dialog nobody will see: say it and fail
                 print(f"plantreg-gui: error: {title}: {msg}", file=sys.stderr)
             if done is not None:
@@ -126,9 +134,15 @@ class MainWindow(QMainWindow):
             if prep is not None:
                 prep()
         QApplication.processEvents()
+        import errno
+
+        from ..core.io.imageio import atomic_path
+
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        self.grab().save(str(path), "PNG")
+        with atomic_path(path) as tmp:  # the one atomic writer: never half a PNG, never a special file
+            if not self.grab().save(str(tmp), "PNG"):  # Qt says False, never why
+                raise OSError(errno.EIO, "the PNG could not be written", str(tmp))
         print(f"screenshot saved to {path}")
 
     def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)

@@ -36,6 +36,8 @@ def _aruco_dictionary(name: str):
 #: Largest board square (or marker) side, metres: a calibration target with larger squares would
 #: not fit a phenotyping rig's view (a typical one has 20-60 mm).
 MAX_SQUARE_M = 1.0
+#: Smallest: a printed square of a tenth of a millimetre is beyond any camera of such a rig.
+MIN_SQUARE_M = 1e-4
 
 
 @dataclass
@@ -174,9 +176,13 @@ class Board:
                                  f"got {show(d[k])}") from None
         for k in ("square_size", "marker_size"):
             if k == "square_size" or d.get(k) is not None:
-                if number(d[k], f"board.{k} (metres)", positive=True) > MAX_SQUARE_M:
+                s = number(d[k], f"board.{k} (metres)", positive=True)
+                if s > MAX_SQUARE_M:
                     raise ValueError(f"board.{k} is {show(d[k])} m; the sanity bound is {MAX_SQUARE_M:g} m (metres: "
                                      "millimetres by mistake?)")
+                if s < MIN_SQUARE_M:  # 5e-324 m: every view "could not be calibrated", the board not named
+                    raise ValueError(f"board.{k} is {show(d[k])} m; the sanity bound is at least {MIN_SQUARE_M:g} m "
+                                     "(0.1 mm; metres: kilometres by mistake?)")
         try:
             return cls(
                 type=str(d.get("type", "chessboard")),

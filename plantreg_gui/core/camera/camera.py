@@ -189,6 +189,7 @@ class Camera:
         v.check_distortion(dist, K, width, height, key)
         v.check_rotation(R, key)
         v.check_translation(t, key)
+        v.camera_px_keys(d, key)
         extra = {k: val for k, val in d.items() if k not in cls._KNOWN}
         # canonical modality name ('visible' -> 'rgb', 'lwir' -> 'thermal'): nothing downstream re-interprets it
         return cls(name, _modality.canonical(modality), width, height, K, dist if dist.size else np.zeros(5), R, t, extra)

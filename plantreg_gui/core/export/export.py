@@ -36,8 +36,7 @@ from ..data.recording import Recording
 from ..display import display
 from ..errors import InputError
 from ..io.imageio import TIFF_CODEC_DEFAULT, atomic_output_dir, atomic_write_text, write_png
-from ..io.lock import output_lock
-from ..io.paths import check_output_location
+from ..io.lock import claim_output
 from ..progress import Reporter, ensure_reporter
 from ..registration.params import RegistrationResult
 from ..validate import file_stem
@@ -315,9 +314,12 @@ def write_outputs(
     keep: list[Path] = [Path(v) for k, v in (inputs or {}).items()
                         if isinstance(v, Path) or (k == "rig" and isinstance(v, str))]
     if recording is not None and recording.folder is not None:
-        keep += [Path(recording.folder), *map(Path, recording.paths.values())]
-    check_output_location(out, "output", folder=True, overwrite=overwrite, inputs=keep)
-    with output_lock(out), atomic_output_dir(out, overwrite) as tmp, Background() as background:
+        from ..data.recording import recording_inputs
+
+        # what registering it read, as `plantreg register` lists it (the manifest, ENVI data files)
+        keep += [Path(recording.folder), *map(Path, recording.paths.values()), *recording_inputs(recording.folder)]
+    with claim_output(out, "output", folder=True, overwrite=overwrite, inputs=keep), \
+            atomic_output_dir(out, overwrite) as tmp, Background() as background:
         ctx = ExportContext(tmp, result, rig, recording, cams, preview, tiff_codec, mosaic_tile, inputs, t_start,
                             background=background, early=early)
         done = 0.0

@@ -258,6 +258,10 @@ def _read_tiff(path: Path) -> Callable[[], np.ndarray]:
             raise InputError("TIFF file holds no image", path)
         series = tf.series[0]
         shape, axes = tuple(series.shape), series.axes
+        # a stack of one page (numpy's (1, H, W) written as it is): the page, not a 1-row image
+        squeeze = len(shape) >= 3 and shape[0] == 1 and axes[:1] not in ("S", "Y")
+        if squeeze:
+            shape, axes = shape[1:], axes[1:]
         # band-first planar cubes are moved band-last below: check the shape they will have
         check = shape[1:] + shape[:1] if len(shape) == 3 and axes.endswith("SYX") else shape
         _check_array_header(path, check, series.dtype, "the TIFF header")
@@ -271,6 +275,8 @@ def _read_tiff(path: Path) -> Callable[[], np.ndarray]:
     def decode() -> np.ndarray:
         with tifffile.TiffFile(path) as t:
             img = t.series[0].asarray()
+        if squeeze:
+            img = img[0]
         if img.ndim == 3 and axes.endswith("SYX"):
             # planar-separate multi-band TIFF (GDAL's INTERLEAVE=BAND): tifffile gives bands
             # first; plantreg's arrays are band-last
@@ -368,6 +374,15 @@ def image_decoder(path: str | Path) -> Callable[[], np.ndarray]:
     The function's ``pixel_file`` is the file it reads (an ENVI header's data file)."""
     path = check_input_file(path, "image")
     if path.stat().st_size == 0:
+        try:  # /proc and /sys files say 0 bytes and still have content: not "empty"
+            with open(path, "rb") as f:
+                content = bool(f.read(1))
+        except OSError as e:  # /proc/self/mem
+            raise InputError(f"is not an image file on disk: it reports a size of 0 bytes and cannot be read "
+                             f"({e.strerror or e})", path) from None
+        if content:
+            raise InputError("is not an image file on disk: it reports a size of 0 bytes but has content "
+                             "(a /proc or /sys pseudo-file?)", path)
         raise InputError("image file is empty (0 bytes)", path)
     suffix = path.suffix.lower()
 
@@ -598,6 +613,14 @@ def write_tiff(path: str | Path, img: np.ndarray) -> None:
         tifffile.imwrite(tmp, a, **kw)
 
 
+def _nonempty_dir(p: Path) -> bool:
+    try:
+        with os.scandir(p) as it:
+            return any(True for _ in it)
+    except OSError:
+        return False
+
+
 @contextmanager
 def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path]:
     """Build an output folder under a temporary name and move it into place at the end.
@@ -619,6 +642,11 @@ def atomic_output_dir(out: str | Path, overwrite: bool = False) -> Iterator[Path
         yield tmp
         _publish(tmp, is_dir=True)
         with signals.deferred():
+            if not overwrite and _nonempty_dir(out):
+                # made by someone else while this run worked (checked empty at the start): not ours to remove
+                raise InputError("output folder was created and filled by someone else while plantreg worked; "
+                                 "it is left as it is and nothing was written (choose another, or allow "
+                                 "overwriting)", out)
             if os.path.lexists(out):
                 old = temp_beside(out, folder=True, suffix=".old")
                 os.replace(out, old / "x")

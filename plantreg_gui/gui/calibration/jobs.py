@@ -122,12 +122,29 @@ def save_job(calibration, session, report, excluded: set[Key], rig_path: Path, r
     rig = calibrated_rig(calibration, session, report, roi=(np.asarray(roi_min, float), np.asarray(roi_max, float)),
                          excluded=set(excluded))
     rig_path = Path(rig_path)
-    from ...core.calibration.report import report_files, write_calibration
+    from contextlib import ExitStack
+
+    from ...core.calibration.report import report_files
+    from ...core.io.lock import claim_output
     from ...core.io.paths import check_output_location
 
-    # the dialogs asked before replacing a file; an input of the session is never replaced
-    for f in [rig_path, *(report_files(report_path) if report is not None and report_path is not None else [])]:
-        check_output_location(f, "output", overwrite=True, inputs=session.inputs())
+    # the dialogs asked before replacing a file; an input of the session is never replaced. The
+    # rig and the report are taken as `plantreg calibrate` takes them (checked, then locked)
+    files = [rig_path, *(report_files(report_path) if report is not None and report_path is not None else [])]
+    with ExitStack() as claims:
+        for i, f in enumerate(files):
+            if i <= 1:  # the rig and the report
+                claims.enter_context(claim_output(f, "output", overwrite=True, inputs=session.inputs(),
+                                                  lock_what="calibration output"))
+            else:  # the report's tables follow the report's lock
+                check_output_location(f, "output", overwrite=True, inputs=session.inputs())
+        return _save(rig, rig_path, calibration, session, report, report_path, progress)
+
+
+def _save(rig, rig_path: Path, calibration, session, report, report_path: Path | None,
+          progress: Reporter) -> dict[str, str]:
+    from ...core.calibration.report import write_calibration
+
     rig_path.parent.mkdir(parents=True, exist_ok=True)
     out: dict[str, str] = {"rig": str(rig_path)}
 

@@ -547,7 +547,12 @@ class RegistrationWorkspace(QWidget):
         out = Path(out)
         from ...core.io.paths import check_output_location
 
+        from ...core.data.recording import recording_inputs
+
+        # the inputs as `plantreg register` lists them (the folder, its manifest, every file it names)
         keep = [p for p in (s.rig_path, s.recording_path) if p is not None]
+        if s.recording_path is not None:
+            keep += recording_inputs(s.recording_path)
         if s.recording is not None:
             keep += [Path(p) for p in s.recording.paths.values()]
         # the one output check, before "Replace it?" rather than after Yes (the dialog asks about a non-empty folder)
