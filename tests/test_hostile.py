@@ -725,45 +725,69 @@ def test_forged_headers_refused_under_a_memory_limit(tmp_path):
     assert "memory" not in r.stdout.lower() and "Traceback" not in r.stderr
 
 
-#: ``python -c HELD ARGS...`` runs ``plantreg ARGS...`` whose first output made ready to be moved
-#: into place (``imageio._publish``, on whichever thread) creates the file ``$PLANTREG_TEST_HOLD`` and
-#: waits there (up to 120 s) for a terminating signal: a signal sent once that file exists arrives
-#: while the output is being written, however loaded the machine. (Waiting for the temporary
-#: output to appear and signalling then lost that race to the run, three and five tries in a row,
-#: beside two busy CPU loops.)
-HELD = """
-import os, sys, threading, time
-from pathlib import Path
-from plantreg_gui.core import signals
-from plantreg_gui.core.io import imageio
-from plantreg_gui.cli import main
+#: A ``sitecustomize`` for child runs (:func:`held_env`): in every Python process of the run -- the
+#: command and the worker processes it spawns, which inherit the environment -- the first output
+#: made ready to be moved into place (``imageio._publish``, on whichever thread; the first of all
+#: the run's processes, by an exclusive create of ``$PLANTREG_TEST_HOLD``) creates that file and
+#: waits there until a terminating signal arrives or ``$PLANTREG_TEST_RELEASE`` exists. A signal sent
+#: (or a second run started) once the hold file exists meets the run while it writes, however loaded
+#: the machine: waiting for the temporary output to appear and acting then lost that race to the
+#: run, three and five tries in a row, beside two busy CPU loops.
+HOLD_SITE = """
+import os
+if os.environ.get("PLANTREG_TEST_HOLD"):
+    import time
+    from plantreg_gui.core import signals
+    from plantreg_gui.core.io import imageio
 
-hold, publish, once = Path(os.environ["PLANTREG_TEST_HOLD"]), imageio._publish, threading.Lock()
+    _hold, _release, _publish = os.environ["PLANTREG_TEST_HOLD"], os.environ.get("PLANTREG_TEST_RELEASE"), imageio._publish
 
-def held(tmp, is_dir=False):
-    if once.acquire(blocking=False):
-        hold.touch()
-        end = time.monotonic() + 120
-        while time.monotonic() < end and signals.terminating() is None:
+    def _held(tmp, is_dir=False):
+        try:
+            os.close(os.open(_hold, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:  # another output (or process) of this run holds or held
+            return _publish(tmp, is_dir)
+        end = time.monotonic() + 300
+        while time.monotonic() < end and signals.terminating() is None and not (_release and os.path.exists(_release)):
             time.sleep(0.01)
         signals.check()  # on a worker thread the handler (main thread) only marks the process ending
-    publish(tmp, is_dir)
+        return _publish(tmp, is_dir)
 
-imageio._publish = held
-sys.exit(main(sys.argv[1:]))
+    imageio._publish = _held
 """
 
 
-def signal_while_held(args: list[str], hold: Path, sig: int, group: bool = False) -> tuple[subprocess.Popen, str]:
-    """Run ``plantreg ARGS`` (:data:`HELD`), send ``sig`` (to its process group with ``group``) once
-    it holds at its first output, and return the process and its stderr."""
-    env = {**_env(), "PLANTREG_TEST_HOLD": str(hold)}
-    p = subprocess.Popen([sys.executable, "-c", HELD, *args], env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, start_new_session=group)
+def held_env(tmp: Path, release: bool = False) -> tuple[dict, Path, Path | None]:
+    """The environment of a run that holds at its first output (:data:`HOLD_SITE`): returns it, the
+    hold file (exists once the run holds) and, with ``release``, the file whose creation lets it go
+    on (else only a terminating signal does). ``tmp``: a folder for the site module and both files."""
+    site = tmp / "hold_site"
+    site.mkdir(exist_ok=True)
+    (site / "sitecustomize.py").write_text(HOLD_SITE)
+    env = _env()
+    env["PYTHONPATH"] = f"{site}{os.pathsep}{env['PYTHONPATH']}"
+    env["PLANTREG_TEST_HOLD"] = str(tmp / "holding")
+    rel = tmp / "release" if release else None
+    if rel is not None:
+        env["PLANTREG_TEST_RELEASE"] = str(rel)
+    return env, tmp / "holding", rel
+
+
+def wait_for_hold(hold: Path, p: subprocess.Popen, timeout: float = 600) -> None:
     t0 = time.monotonic()
-    while not hold.exists() and p.poll() is None and time.monotonic() - t0 < 600:
+    while not hold.exists() and p.poll() is None and time.monotonic() - t0 < timeout:
         time.sleep(0.02)
     assert p.poll() is None and hold.exists(), ("the run did not reach its first output", p.poll())
+
+
+def signal_while_held(args: list[str], tmp: Path, sig: int, group: bool = False) -> tuple[subprocess.Popen, str]:
+    """Run ``plantreg ARGS``, send ``sig`` (to its process group with ``group``) once it holds at its
+    first output (:func:`held_env`; ``tmp``: a folder outside the outputs), return the process and
+    its stderr."""
+    env, hold, _ = held_env(tmp)
+    p = subprocess.Popen([sys.executable, "-m", "plantreg_gui", *args], env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, start_new_session=group)
+    wait_for_hold(hold, p)
     if group:
         os.killpg(p.pid, sig)
     else:
@@ -779,7 +803,7 @@ def test_signal_while_writing_leaves_nothing(tmp_path, sig):
     work = tmp_path / "work"
     work.mkdir()
     out = work / "demo"
-    p, err = signal_while_held(["demo", str(out), "--quiet"], tmp_path / "writing", sig)
+    p, err = signal_while_held(["demo", str(out), "--quiet"], tmp_path, sig)
     assert p.returncode == 128 + sig, (p.returncode, err)
     assert "Traceback" not in err
     assert list(work.iterdir()) == []

@@ -25,7 +25,8 @@ from pathlib import Path
 import pytest
 
 from plantreg_gui import cli
-from test_hostile import _env, _no_leftovers, _write_inputs, signal_while_held, tiny_session  # noqa: F401 - a fixture
+from test_hostile import (_env, _no_leftovers, _write_inputs, held_env, signal_while_held,  # noqa: F401 - a fixture
+                          tiny_session, wait_for_hold)
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANTREG = [sys.executable, "-m", "plantreg_gui"]
@@ -221,34 +222,6 @@ def _wait_for_part(folder: Path, pattern: str, proc: subprocess.Popen, timeout: 
     return None
 
 
-def _signal_while_writing(cmd: list[str], folder: Path, pattern: str, out: Path, sig: int,
-                         tries: int = 5, settle: float = 0.0) -> tuple[subprocess.Popen, str]:
-    """Run ``cmd`` in its own process group and send ``sig`` to the group when a hidden ``pattern``
-    output appears in ``folder``. On a loaded machine this test process may be scheduled again
-    only after the run has finished (the signal then finds no process, or one that has already
-    moved its complete result into place and exits 0): such a try must leave a complete ``out``
-    and nothing hidden, and is made again. Returns the process and its stderr of the first try
-    the signal reached while it ran."""
-    for _ in range(tries):
-        p = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                             start_new_session=True)
-        part = _wait_for_part(folder, pattern, p)
-        if part is not None:
-            time.sleep(settle)
-            try:
-                os.killpg(p.pid, sig)
-            except ProcessLookupError:
-                pass
-        _o, err = p.communicate(timeout=300)
-        if part is not None and p.returncode != 0:
-            return p, err
-        # finished before it was caught: a complete result, nothing hidden beside it
-        assert p.returncode == 0 and out.is_dir() and _leftovers(out) == [], (p.returncode, err)
-        assert not [x for x in folder.iterdir() if x.name.startswith(".")], list(folder.iterdir())
-        shutil.rmtree(out)
-    raise AssertionError(f"the signal never reached the run while it wrote ({tries} tries)")
-
-
 @pytest.fixture(scope="module")
 def two_recordings(demo_dir, tmp_path_factory):
     """Two copies of the demo recording (640 x 576 target: writing takes long enough to be caught)."""
@@ -261,18 +234,21 @@ def two_recordings(demo_dir, tmp_path_factory):
 
 
 def test_a_second_batch_while_the_first_writes_is_refused(two_recordings, tmp_path):
-    """Batch A is writing into OUT (its worker's hidden folder seen) when batch B is started into
-    the same OUT: B is refused with one line naming OUT and A's process, and writes nothing; A
-    ends normally with both rows and no lock file left (B used to run too, the last writer's
-    batch.csv winning)."""
+    """Batch A is writing into OUT (held at its worker's first output, :func:`test_hostile.held_env`)
+    when batch B is started into the same OUT: B is refused with one line naming OUT and A's
+    process, and writes nothing; A, let go, ends normally with both rows and no lock file left (B
+    used to run too, the last writer's batch.csv winning)."""
     rig, recs = two_recordings
-    out = tmp_path / "out"
+    work = tmp_path / "work"
+    work.mkdir()
+    out = work / "out"
     cmd = [*PLANTREG, "batch", "--rig", str(rig), "--target", "ir", "--out", str(out), "--workers", "1", "--quiet"]
-    a = subprocess.Popen([*cmd, *map(str, recs)], env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True)
+    env, hold, release = held_env(tmp_path, release=True)
+    a = subprocess.Popen([*cmd, *map(str, recs)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        assert _wait_for_part(out, ".rec0*.part", a) is not None
-        b = subprocess.run([*cmd, str(recs[0])], env=_env(), capture_output=True, text=True, timeout=120)
+        wait_for_hold(hold, a)
+        b = subprocess.run([*cmd, str(recs[0])], env=_env(), capture_output=True, text=True, timeout=300)
+        release.touch()
         _o, err_a = a.communicate(timeout=300)
     finally:
         if a.poll() is None:
@@ -281,22 +257,23 @@ def test_a_second_batch_while_the_first_writes_is_refused(two_recordings, tmp_pa
     assert str(out) in b.stderr and len(b.stderr.strip().splitlines()) == 1
     assert a.returncode == 0, err_a
     assert list(_rows(out)) == ["rec01", "rec02"] and {r["status"] for r in _rows(out).values()} == {"done"}
-    assert _leftovers(tmp_path) == []
+    assert _leftovers(work) == []
 
 
 def test_sigterm_to_the_batch_process_group_leaves_no_part(two_recordings, tmp_path):
-    """SIGTERM to the whole process group (systemd, Slurm), sent when a worker's hidden
-    ``.rec0N.XXXX.part`` folder is seen: every process removes what it was writing (it used to leave
-    ``.rec02.XXXX.part`` with a partial TIFF), exit 143, no traceback, no lock file."""
+    """SIGTERM to the whole process group (systemd, Slurm), sent while a worker writes (held at its
+    first output, :func:`test_hostile.held_env`): every process removes what it was writing (it used
+    to leave ``.rec02.XXXX.part`` with a partial TIFF), exit 143, no traceback, no lock file."""
     rig, recs = two_recordings
-    out = tmp_path / "out"
-    p, err = _signal_while_writing([*PLANTREG, "batch", "--rig", str(rig), "--target", "ir", "--out", str(out),
-                                    "--workers", "1", "--quiet", *map(str, recs)], tmp_path, "out/.rec0*.part",
-                                   out, signal.SIGTERM, settle=0.05)
+    work = tmp_path / "work"
+    work.mkdir()
+    out = work / "out"
+    p, err = signal_while_held(["batch", "--rig", str(rig), "--target", "ir", "--out", str(out), "--workers", "1",
+                                "--quiet", *map(str, recs)], tmp_path, signal.SIGTERM, group=True)
     time.sleep(0.5)  # a worker that outlived its parent would still be writing now
     assert p.returncode == 128 + signal.SIGTERM, (p.returncode, err)
     assert "Traceback" not in err
-    assert _leftovers(tmp_path) == [], _leftovers(tmp_path)
+    assert _leftovers(work) == [], _leftovers(work)
 
 
 def _register_cmd(rig, rec, out) -> list[str]:
@@ -314,8 +291,7 @@ def test_signal_to_register_while_it_writes_leaves_nothing(two_recordings, tmp_p
     work = tmp_path / "work"
     work.mkdir()
     out = work / "out"
-    p, err = signal_while_held(_register_cmd(rig, recs[0], out)[len(PLANTREG):], tmp_path / "writing", sig,
-                               group=True)
+    p, err = signal_while_held(_register_cmd(rig, recs[0], out)[len(PLANTREG):], tmp_path, sig, group=True)
     assert p.returncode == 128 + sig, (p.returncode, err)
     assert "Traceback" not in err and "core dumped" not in err
     assert sorted(x.name for x in work.iterdir()) == [], list(work.iterdir())
