@@ -732,13 +732,22 @@ def test_forged_headers_refused_under_a_memory_limit(tmp_path):
 #: waits there until a terminating signal arrives or ``$PLANTREG_TEST_RELEASE`` exists. A signal sent
 #: (or a second run started) once the hold file exists meets the run while it writes, however loaded
 #: the machine: waiting for the temporary output to appear and acting then lost that race to the
-#: run, three and five tries in a row, beside two busy CPU loops.
+#: run, three and five tries in a row, beside two busy CPU loops. The run starts with the default
+#: disposition of every signal (a suite run under ``nohup`` or as a script's background job has
+#: SIGHUP, or SIGINT and SIGQUIT, ignored: the run then rightly ignored the test's signal).
 HOLD_SITE = """
 import os
 if os.environ.get("PLANTREG_TEST_HOLD"):
-    import time
+    import signal, time
     from plantreg_gui.core import signals
     from plantreg_gui.core.io import imageio
+
+    # the test signals this run: it starts with default dispositions, whatever the shell that ran the
+    # suite ignored (nohup: SIGHUP; a background job of a script: SIGINT and SIGQUIT), which
+    # plantreg rightly keeps ignored
+    for _s in signals.TERMINATING:
+        if signal.getsignal(_s) is signal.SIG_IGN:
+            signal.signal(_s, signal.SIG_DFL)
 
     _hold, _release, _publish = os.environ["PLANTREG_TEST_HOLD"], os.environ.get("PLANTREG_TEST_RELEASE"), imageio._publish
 
