@@ -50,12 +50,17 @@ S11_SEED = 2311  # session 11's held-out draw (fixed before any fit; README "Ses
 GROUND_Z = 1.15  # rig_nominal.json's ROI far limit: the tray's floor lies beyond it
 
 
+#: the session-11 readers whose pairs may be fitted; ``eye_readings_s11c.json`` is the independent
+#: evaluation reader's (``../landmarks_independent_s11.json``, never fitted; another format)
+S11_FILES = ("eye_readings_s11a.json", "eye_readings_s11b.json")
+
+
 def readings() -> tuple[dict, set[str]]:
     """All eye readings (``eye_readings.json`` + ``eye_readings_s11*.json``) and the names read in
     session 11. A name in two files is refused (two readers' pairs must stay apart)."""
     rd = json.loads((HERE / "eye_readings.json").read_text())
     s11: set[str] = set()
-    for f in sorted(HERE.glob("eye_readings_s11*.json")):
+    for f in [HERE / n for n in S11_FILES]:
         for name, r in json.loads(f.read_text()).items():
             if name in rd:
                 raise SystemExit(f"{f.name}: {name} is already read in another file")
