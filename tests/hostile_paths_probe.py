@@ -963,17 +963,23 @@ def run_case(name, f, expect):
         subprocess.run(["chmod", "-R", "u+w", str(r)]); shutil.rmtree(r, ignore_errors=True)
     return verdict, p.returncode, (problems, err.strip()[-300:])
 
-if __name__ == "__main__":
-    Path(ROOT, "runs").mkdir(parents=True, exist_ok=True)
-    _fixtures()
+def run_cases(cases, run, only, width: int = 32, error_chars: int | None = None) -> None:
+    """Run each ``(name, make, expect)`` of ``cases`` whose name contains one of ``only`` (all
+    without) through ``run``, print a verdict line each and the totals (both probes' report)."""
     counts = {}
-    for name, f, expect in CASES:
+    for name, f, expect in cases:
         if only and not any(o in name for o in only):
             continue
         try:
-            v, rc_, info = run_case(name, f, expect)
+            v, rc_, info = run(name, f, expect)
         except Exception as e:
-            v, rc_, info = "PROBE-ERROR", None, repr(e)
+            v, rc_, info = "PROBE-ERROR", None, repr(e)[:error_chars]
         counts[v] = counts.get(v, 0) + 1
-        print(f"{v:11s} {name:32s} rc={rc_} {info if v not in ('clean','ok') else ''}", flush=True)
+        print(f"{v:11s} {name:{width}s} rc={rc_} {info if v not in ('clean','ok') else ''}", flush=True)
     print("TOTAL", sum(counts.values()), counts)
+
+
+if __name__ == "__main__":
+    Path(ROOT, "runs").mkdir(parents=True, exist_ok=True)
+    _fixtures()
+    run_cases(CASES, run_case, only)

@@ -1261,14 +1261,4 @@ if __name__ == "__main__":
     hp._fixtures()
     if not Path(ROOT, "demo").exists():
         subprocess.run([PY, "-m", "plantreg_gui", "demo", f"{ROOT}/demo", "--quiet"], check=True, env=dict(os.environ, PYTHONPATH=SRC))
-    counts = {}
-    for name, f, expect in CASES:
-        if only and not any(o in name for o in only):
-            continue
-        try:
-            v, rc_, info = run_case(name, f, expect)
-        except Exception as e:
-            v, rc_, info = "PROBE-ERROR", None, repr(e)[:300]
-        counts[v] = counts.get(v, 0) + 1
-        print(f"{v:11s} {name:48s} rc={rc_} {info if v not in ('clean', 'ok') else ''}", flush=True)
-    print("TOTAL", sum(counts.values()), counts)
+    hp.run_cases(CASES, run_case, only, width=48, error_chars=300)
