@@ -460,6 +460,21 @@ def test_cancel_and_close_during_detection(qtbot, demo_dir, tmp_path):
     assert not w.is_busy()
 
 
+def test_progress_sent_before_a_cancel_does_not_overwrite_cancelled(qtbot):
+    """The runner's last progress message can reach the GUI thread just before its "cancelled":
+    the throttled status line must not show it after "cancelled" (seen on a loaded machine)."""
+    w = _wizard(qtbot)
+    try:
+        w._job_name = "Detecting corners"
+        w._on_progress(0.2, "pose_01/rgb: found")  # shown at once, starts the throttle timer
+        w._on_progress(0.3, "pose_02/rgb: found")  # held for the timer
+        w._on_cancelled()
+        qtbot.wait(3 * w._progress_timer.interval() + 50)
+        assert w.status.text() == "Detecting corners: cancelled"
+    finally:
+        _close(w)
+
+
 # ---------------------------------------------------------------------- coverage (pure numpy, known geometry)
 def test_coverage_map_of_known_board_outlines():
     from types import SimpleNamespace

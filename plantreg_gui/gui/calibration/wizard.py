@@ -359,7 +359,7 @@ class CalibrationWizard(QWidget):
 
     @Slot(object)
     def _on_finished(self, result) -> None:
-        self._pending_progress = None
+        self._drop_pending_progress()
         self.status.setText(f"{self._job_name}: done")
         self.progress.setValue(1000)
         cb = self._on_result
@@ -371,6 +371,7 @@ class CalibrationWizard(QWidget):
     @Slot(str, str)
     def _on_failed(self, message: str, details: str) -> None:
         self._queue.clear()
+        self._drop_pending_progress()
         self.last_error = message
         self.status.setText(f"{self._job_name} failed")
         show_error(self, f"{self._job_name} failed", message, details)
@@ -380,7 +381,12 @@ class CalibrationWizard(QWidget):
         if self._job_session is not None and self._job_session is not self.model.session:
             return  # superseded by another session: its queued steps stay
         self._queue.clear()
+        self._drop_pending_progress()  # a message sent before the cancel must not overwrite it
         self.status.setText(f"{self._job_name}: cancelled")
+
+    def _drop_pending_progress(self) -> None:
+        self._pending_progress = None
+        self._progress_timer.stop()
 
     @Slot()
     def _on_done(self) -> None:
