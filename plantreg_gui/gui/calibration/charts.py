@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from PySide6.QtCore import QPointF, QRectF, Qt, Signal
+from PySide6.QtCore import QPointF, QRect, QRectF, Qt, Signal
 from PySide6.QtGui import QBrush, QColor, QFont, QPainter, QPen
 from PySide6.QtWidgets import QSizePolicy, QWidget
 
@@ -309,6 +309,14 @@ class UncertaintyMap(_Chart):
         self._maps = list(maps)
         self.update()
 
+    CAPTION = "σ in px, coloured relative to each camera's limit (its colour bar); hatched: no board corner seen there"
+
+    @staticmethod
+    def _wrapped_height(fm, text: str, width: float) -> int:
+        """Height (px) of ``text`` word-wrapped to ``width`` px (its own line breaks kept)."""
+        flags = int(Qt.TextFlag.TextWordWrap)
+        return fm.boundingRect(QRect(0, 0, max(int(width), 1), 100000), flags, text).height()
+
     def paintEvent(self, event) -> None:  # noqa: N802
         p = QPainter(self)
         p.setRenderHint(QPainter.RenderHint.Antialiasing, False)
@@ -320,34 +328,39 @@ class UncertaintyMap(_Chart):
         n = len(self._maps)
         W, H = self.width(), self.height()
         fm = p.fontMetrics()
-        title_h0 = 2 * fm.height() + 14
+        wrap = Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignTop | Qt.TextFlag.TextWordWrap
+        # titles and the one caption wrap instead of being cut: a panel ~220 px wide (four cameras
+        # at 1280 x 720) showed "…least certai…" and "hatched…"
+        cap_h = self._wrapped_height(fm, self.CAPTION, W - 8) + 4
+        H_maps = max(H - cap_h, 1)
         aspect0 = float(np.median([m.get("aspect", 4 / 3) for m in self._maps]))
+
+        def title_h(c: int) -> int:  # the tallest wrapped title with ``c`` columns
+            return max(self._wrapped_height(fm, str(m["title"]), W / c - 8) for m in self._maps) + 6
 
         def size(c: int) -> float:  # panel width with ``c`` columns
             r = math.ceil(n / c)
-            return min(W / c - 16, (H / r - title_h0) * aspect0)
+            return min(W / c - 16, (H_maps / r - title_h(c) - 10) * aspect0)
 
         cols = max(range(1, n + 1), key=size)
         rows = math.ceil(n / cols)
-        cw, ch = W / cols, H / rows
+        cw, ch = W / cols, H_maps / rows
+        th = title_h(cols)
         for k, m in enumerate(self._maps):
             x0, y0 = (k % cols) * cw, (k // cols) * ch
             sig = np.asarray(m["sigma"], float)
             cnt = np.asarray(m["corners"])
             gh, gw = sig.shape
-            title_h = 2 * fm.height() + 6
             aspect = m.get("aspect", gw / gh)
             lim = float(m["limit"])
             # this camera's colour bar (the colours are relative to its own limit): bar + tick labels
             bar_w = 10 + 6 + fm.horizontalAdvance(f"≥{lim:.2f}") + 4
-            avail_w, avail_h = cw - 16 - bar_w, ch - title_h - 10 - fm.height()
-            pw = min(avail_w, avail_h * aspect)
+            avail_w, avail_h = cw - 16 - bar_w, ch - th - 10
+            pw = max(min(avail_w, avail_h * aspect), 1.0)
             ph = pw / aspect
-            left, top = x0 + (cw - pw - bar_w) / 2, y0 + title_h + 4
+            left, top = x0 + (cw - pw - bar_w) / 2, y0 + th + 4
             p.setPen(QColor("#222222"))
-            for li, line in enumerate(str(m["title"]).split("\n")[:2]):  # two lines, each elided to fit
-                p.drawText(QRectF(x0 + 4, y0 + 2 + li * fm.height(), cw - 8, fm.height()), Qt.AlignmentFlag.AlignLeft,
-                           fm.elidedText(line, Qt.TextElideMode.ElideRight, int(cw - 8)))
+            p.drawText(QRectF(x0 + 4, y0 + 2, cw - 8, th), wrap, str(m["title"]))
             # outlined: where more views are asked for (only when a limit is exceeded)
             worst = set(np.argsort(-sig.ravel())[:3].tolist()) if m.get("needs_views", True) else set()
             sx, sy = pw / gw, ph / gh
@@ -368,10 +381,8 @@ class UncertaintyMap(_Chart):
             p.setBrush(Qt.BrushStyle.NoBrush)
             p.drawRect(QRectF(left, top, pw, ph))
             self._colour_bar(p, QRectF(left + pw + 8, top, 10, ph), lim)
-            p.setPen(QColor("#333333"))
-            p.drawText(QRectF(left, top + ph + 2, pw + bar_w, fm.height()), Qt.AlignmentFlag.AlignLeft,
-                       fm.elidedText("σ px, colours to this camera's limit; hatched: no board seen",
-                                     Qt.TextElideMode.ElideRight, int(pw + bar_w)))
+        p.setPen(QColor("#333333"))
+        p.drawText(QRectF(4, H - cap_h, W - 8, cap_h), wrap, self.CAPTION)
 
     @staticmethod
     def _colour_bar(p: QPainter, r: QRectF, lim: float) -> None:

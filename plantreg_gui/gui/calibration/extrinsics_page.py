@@ -8,8 +8,15 @@ from PySide6.QtWidgets import QGroupBox, QHeaderView, QLabel, QSplitter, QVBoxLa
 
 from . import results
 from .page import WizardPage
-from .frusta_view import FrustaView
+from .frusta_view import FrustaView, legend_html
 from .widgets import banner, fill_matrix, fmt, grade_legend, item, make_table, set_banner
+
+
+def _note(text: str) -> QLabel:
+    lab = QLabel(text)
+    lab.setWordWrap(True)
+    lab.setStyleSheet("color: #444444;")
+    return lab
 
 
 class ExtrinsicsPage(WizardPage):
@@ -24,16 +31,23 @@ class ExtrinsicsPage(WizardPage):
         left = QWidget()
         ll = QVBoxLayout(left)
         ll.setContentsMargins(0, 0, 0, 0)
-        g = QGroupBox("Extrinsic (epipolar) error: distance of the target's corner to the epipolar line "
-                      "of the origin's corner")
+        # short group titles, the rest in wrapped labels: a group box is at least as wide as its
+        # title, and two long ones made the page scroll sideways at 1280 px (the 3D view's legend cut)
+        g = QGroupBox("Extrinsic (epipolar) error")
         gl = QVBoxLayout(g)
+        gl.addWidget(_note("Distance of the target camera's corner to the epipolar line of the origin "
+                           "camera's corner."))
         self.table = make_table()
         gl.addWidget(self.table, 1)
         gl.addWidget(grade_legend())
+        # what a red cell means, and why it may be red here (hidden without red cells)
+        self.red_note = banner()
+        gl.addWidget(self.red_note)
         ll.addWidget(g, 3)
-        g2 = QGroupBox("Camera poses in the rig frame (= reference camera's frame): optical centre, rotation angle, "
-                       "and their standard errors (±)")
+        g2 = QGroupBox("Camera poses in the rig frame")
         g2l = QVBoxLayout(g2)
+        g2l.addWidget(_note("The rig frame is the reference camera's frame: optical centre, rotation angle, "
+                            "and their standard errors (±)."))
         self.poses = make_table()
         g2l.addWidget(self.poses)
         ll.addWidget(g2, 0)
@@ -43,10 +57,13 @@ class ExtrinsicsPage(WizardPage):
         rl.setContentsMargins(0, 0, 0, 0)
         self.view3d = FrustaView()
         rl.addWidget(self.view3d, 1)
-        cap = QLabel("Camera frusta (one colour per camera, see the legend) and the calibrated board poses (grey). "
-                     "Drag to rotate, wheel to zoom.")
-        cap.setWordWrap(True)
-        cap.setStyleSheet("color: #444444;")
+        # the legend under the view, not in it: a legend drawn in the scene is as wide as a fixed
+        # share of the view, and a narrow view (a 1280 px window) cut the camera names
+        self.legend = QLabel()
+        self.legend.setWordWrap(True)
+        self.legend.setTextFormat(Qt.TextFormat.RichText)
+        rl.addWidget(self.legend)
+        cap = _note("Camera frusta and the calibrated board poses. Drag to rotate, wheel to zoom.")
         rl.addWidget(cap)
         split.addWidget(right)
         split.setSizes([700, 620])
@@ -66,6 +83,9 @@ class ExtrinsicsPage(WizardPage):
                        if self.model.report_stale else "")
             names = results.camera_names(cal, self.model.session)
             fill_matrix(self.table, names, results.table(rep, "extrinsic"), "extrinsic")
+        note = results.red_cells_note(rep, cal if self.model.calibration_ready() else None) if rep is not None else ""
+        self.red_note.setText(note)
+        self.red_note.setVisible(bool(note))
         if cal is not None:
             rig = cal.rig
             self.poses.clear()
@@ -96,3 +116,4 @@ class ExtrinsicsPage(WizardPage):
             if self._drawn is not cal:
                 self._drawn = cal
                 self.view3d.set_scene(list(rig.cameras), results.board_outlines(cal, self.model.session))
+                self.legend.setText(legend_html([c.name for c in rig.cameras]))

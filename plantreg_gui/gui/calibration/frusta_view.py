@@ -1,4 +1,5 @@
-"""3D view of the calibrated rig: camera frusta (one colour per camera, labelled) and board poses.
+"""3D view of the calibrated rig: camera frusta (one colour per camera; the legend is a label
+beside the view, :func:`legend_html`) and board poses.
 
 The pyvistaqt plotter is created lazily (first time the page is shown) and only touched on the
 GUI thread; the wizard hands it plain arrays. A scene is drawn in stages over several event-loop
@@ -7,6 +8,8 @@ into a label on top of the OpenGL widget, because grabbing a native GL window gi
 """
 
 from __future__ import annotations
+
+import html
 
 import numpy as np
 from PySide6.QtCore import Qt
@@ -26,6 +29,20 @@ def frustum_lines(cam, depth: float) -> tuple[np.ndarray, np.ndarray]:
     pts = cam.to_rig(pts_cam)
     lines = np.array([2, 0, 1, 2, 0, 2, 2, 0, 3, 2, 0, 4, 2, 1, 2, 2, 2, 3, 2, 3, 4, 2, 4, 1])
     return pts, lines
+
+
+BOARD_COLOUR = "#c8c8c8"
+
+
+def legend_html(names: list[str]) -> str:
+    """The view's legend as rich text for a label beside it: a swatch of each camera's frustum
+    colour (``names`` in the rig's camera order, as :meth:`FrustaView.set_scene` colours them)
+    and the board poses'. Not drawn in the scene: the optical centres are centimetres apart, and
+    a legend box in the scene is a fixed share of the view (a narrow view cut the names)."""
+    sw = "<span style='color:{c}; font-size: 14pt;'>&#9632;</span>&nbsp;{n}"
+    items = [sw.format(c=camera_colour(i), n=html.escape(n)) for i, n in enumerate(names)]
+    items.append(sw.format(c="#9a9a9a", n="board poses (grey)"))
+    return "Legend: " + " &nbsp; ".join(items)
 
 
 class FrustaView(QWidget):
@@ -49,7 +66,6 @@ class FrustaView(QWidget):
         self.n_frusta = 0
         self.n_boards = 0
         self._n = (0, 0)
-        self._labels: list[tuple[str, str]] = []
         self._frusta: list = []
         self._axes = False
         self._stages = Stages(self)
@@ -97,7 +113,7 @@ class FrustaView(QWidget):
         """Draw the pending scene over several event-loop turns (plotter3d.Stages: with software
         OpenGL the plotter, its first frame and the first frame of each kind of actor each take
         ~100 ms): the plotter (hidden), the widget shown (background only), VTK's first frame,
-        boards and frusta, legend and axes."""
+        boards and frusta, axes (the legend is a label under the view: :func:`legend_html`)."""
         if self._scene is None:
             return
 
@@ -116,7 +132,7 @@ class FrustaView(QWidget):
             steps.append(show_widget)
         if self.plotter is None or first_frame_held(self.plotter):
             steps.append(first_frame)
-        self._stages.start(steps + [self._draw_scene, self._draw_frusta, self._draw_legend, self._draw_axes])
+        self._stages.start(steps + [self._draw_scene, self._draw_frusta, self._draw_axes])
 
     def _draw_scene(self) -> None:
         """The board poses and the camera placed (the frusta follow in the next turn: the first
@@ -132,14 +148,12 @@ class FrustaView(QWidget):
             dists = [float(np.linalg.norm(b.mean(axis=0) - centres.mean(axis=0))) for b in boards]
             depth = 0.4 * float(np.median(dists)) if dists else 0.15
         self._frusta = [(frustum_lines(cam, depth), camera_colour(i)) for i, cam in enumerate(cameras)]
-        self._labels = [(cam.name, camera_colour(i)) for i, cam in enumerate(cameras)]
         with changing(self.plotter) as p:
             p.clear_actors()
-            p.remove_legend(render=False)
             if boards:  # one actor for all boards: each actor costs the first (software GL) render time
                 pts = np.concatenate([np.asarray(b, float) for b in boards])
                 faces = np.concatenate([[4, 4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 3] for i in range(len(boards))])
-                p.add_mesh(pv.PolyData(pts, faces=faces), color="#c8c8c8", opacity=0.35, show_edges=True,
+                p.add_mesh(pv.PolyData(pts, faces=faces), color=BOARD_COLOUR, opacity=0.35, show_edges=True,
                            edge_color="#f0f0f0", render=False)
             # a side view of the rig (rig frame: z forward = down towards the ground): rig at the top,
             # boards below it
@@ -154,14 +168,6 @@ class FrustaView(QWidget):
             for (pts, lines), colour in self._frusta:
                 p.add_mesh(pv.PolyData(pts, lines=lines), color=colour, line_width=3, render=False)
             p.renderer.reset_camera(render=False)  # boards and frusta
-
-    def _draw_legend(self) -> None:
-        with changing(self.plotter) as p:
-            if self._labels:
-                # a legend, not labels in the scene: the optical centres are centimetres apart
-                p.add_legend([[n, c] for n, c in self._labels] + [["board poses", "#c8c8c8"]],
-                             bcolor="#2c313a", border=True, size=(0.22, 0.04 * (len(self._labels) + 1)),
-                             loc="upper right", face="rectangle")
 
     def _draw_axes(self) -> None:
         with changing(self.plotter) as p:

@@ -28,11 +28,12 @@ class IntrinsicsPage(WizardPage):
         lower = QSplitter(Qt.Orientation.Horizontal)
         lower.addWidget(self.chart)
         self.umap = UncertaintyMap()
-        self.umap.setToolTip("Projection uncertainty over each camera's image (px; mrcal's figure, the worst over "
+        self._umap_tip = ("Projection uncertainty over each camera's image (px; mrcal's figure, the worst over "
                              "0.8-1.25x the boards' distance): how far a point may project from where the "
                              "calibration puts it (1 sigma, least certain direction). Green: well within the camera's limit; red: at or beyond it. Hatched: no "
                              "board corner was seen there. Outlined (when a limit is exceeded): where more board views "
                              "would shrink it most.")
+        self.umap.setToolTip(self._umap_tip)
         lower.addWidget(self.umap)
         lower.setSizes([700, 450])
         split.addWidget(lower)
@@ -157,7 +158,10 @@ class IntrinsicsPage(WizardPage):
         ex = results.excluded_px(cal, self.model.excluded, self.model.detections)
         per_view = {c: {p: v for p, v in pv.items() if p not in ex.get(c, {})} for c, pv in per_view.items()}
         self.chart.set_data(per_view, weak, mean, excluded=ex)
-        self.umap.set_data(results.uncertainty_maps(cal))
+        maps = results.uncertainty_maps(cal)
+        self.umap.set_data(maps)
+        details = [m["detail"] for m in maps if m.get("detail")]
+        self.umap.setToolTip(self._umap_tip + ("\n\n" + "\n".join(details) if details else ""))
         # mrcal-style: the worst views first, across cameras (on the normalised error)
         norm = {n: float(c.normalization) for n, c in cal.intrinsics.items()}
         worst = sorted(((px * norm[c], c, p, px) for c, v in per_view.items() for p, px in v.items()), reverse=True)[:6]

@@ -198,10 +198,63 @@ def uncertainty_maps(cal) -> list[dict[str, Any]]:
         med, worst = u.summary()
         lim = limits_px(u)[0]
         lo, hi = u.band_m
-        where = (f"add views: {', '.join(u.add_views)}" if u.needs_views
-                 else f"within the limits; least certain: {', '.join(u.add_views)}")
+        # short titles (four panels share ~400 px at 1280 x 720): the least certain regions of a
+        # camera within its limits go to the tooltip ("detail"); where to add views stays
+        where = f"add views: {', '.join(u.add_views)}" if u.needs_views else "within the limits"
         title = f"{name}: σ median {med:.2f}, worst {worst:.2f} px (limit {lim:.2f})\nat {lo:.2f}-{hi:.2f} m: {where}"
+        detail = f"{name}: least certain {', '.join(u.add_views)}" if not u.needs_views and u.add_views else ""
         out.append({"camera": name, "sigma": u.judged, "corners": u.corners, "limit": lim,
                     "needs_views": u.needs_views,
-                    "aspect": u.width / max(u.height, 1), "title": title})
+                    "aspect": u.width / max(u.height, 1), "title": title, "detail": detail})
     return out
+
+
+def red_cells_note(report, cal=None, red: float = 3.0) -> str:
+    """What the red cells of the extrinsic (epipolar) table say, and what may make them red;
+    "" when no cell's normalised error reaches ``red``. Names each red cell (origin -> target, px,
+    normalised, its worst views), the target image's size (a fraction of a pixel is red on a
+    small thermal image), the usual causes, and, with ``cal``, a camera whose corners fit the
+    joint rig much worse than its own lens model (views that disagree with one rigid rig)."""
+    tab = table(report, "extrinsic")
+    cams = _get(report, "cameras") or {}
+    per_view = (_get(report, "views") or {}).get("extrinsic") or {}
+    cells = []
+    for o, row in tab.items():
+        for t, c in (row or {}).items():
+            if o == t or not isinstance(c, dict):
+                continue
+            nn, px = c.get("normalized"), c.get("px")
+            if nn is not None and px is not None and math.isfinite(float(nn)) and float(nn) >= red:
+                cells.append((float(nn), o, t, float(px)))
+    if not cells:
+        return ""
+    cells.sort(reverse=True)
+    parts = []
+    for nn, o, t, px in cells:
+        views = (per_view.get(o) or {}).get(t) or {}
+        vals = {p: float(v["px"] if isinstance(v, dict) else v) for p, v in views.items()
+                if v is not None and (not isinstance(v, dict) or v.get("px") is not None)}
+        worst = sorted(vals, key=vals.get, reverse=True)[:3]
+        size = cams.get(t) or {}
+        wh = f" of {t}'s {size['width']} × {size['height']}" if "width" in size and "height" in size else ""
+        parts.append(f"{o} → {t} {px:.2f} px{wh} = {nn:.2f} normalised"
+                     + (f" (worst views {', '.join(worst)})" if worst else ""))
+    text = (f"Red cells (normalised error ≥ {red:g}): " + "; ".join(parts) + ". Red means that the origin "
+            f"camera's corners, carried through the calibrated rig, miss the target camera's corners by more "
+            f"than {red:g} px per 1000 px of the target image's size: on a small image a fraction of a pixel is "
+            "already red. Usual causes: the cameras did not see the board at the same moment (a hand-held "
+            "board, cameras not triggered together), a camera moved between views, or mislocated corners "
+            "(look at the worst views on page 3).")
+    if cal is not None:
+        noise = getattr(cal, "noise_px", {}) or {}
+        for name in sorted({c for _nn, o, t, _px in cells for c in (o, t)}):
+            own = getattr(cal.intrinsics.get(name), "rms_px", None) if name in cal.intrinsics else None
+            joint = noise.get(name)
+            if own is None or joint is None or not own > 0:
+                continue
+            own_coord = float(own) / math.sqrt(2.0)  # the lens fit's RMS corner distance, per coordinate
+            if joint >= 2.0 * own_coord:
+                text += (f" {name}'s corners fit the joint rig {joint / own_coord:.1f} × worse than its own lens "
+                         f"model ({joint:.2f} against {own_coord:.2f} px per coordinate): its views disagree "
+                         "with one rigid rig, as when the board moves between the cameras' exposures.")
+    return text

@@ -72,11 +72,19 @@ class RigPage(WizardPage):
         self.new_btn = QPushButton("Create new session…")
         self.open_btn.clicked.connect(self._open)
         self.new_btn.clicked.connect(self._create)
+        # the form's messages and its Save button at the top, beside the session they change: at
+        # the foot of the page they were below the fold of a 1280 x 720 window
+        self.apply_btn = QPushButton("Save changes to session")
+        self.apply_btn.setToolTip("Write cameras, depth and board to session.json (detections are redone)")
+        self.apply_btn.clicked.connect(self._apply)
         h.addWidget(QLabel("Folder:"))
         h.addWidget(self.folder, 1)
         h.addWidget(self.open_btn)
         h.addWidget(self.new_btn)
+        h.addWidget(self.apply_btn)
         outer.addWidget(box)
+        self.message = banner()
+        outer.addWidget(self.message)
 
         row = QHBoxLayout()
         outer.addLayout(row, 1)
@@ -192,15 +200,6 @@ class RigPage(WizardPage):
         bl.addLayout(pv, 1)
         row.addWidget(bbox, 2)
 
-        self.message = banner()
-        outer.addWidget(self.message)
-        hb = QHBoxLayout()
-        self.apply_btn = QPushButton("Save changes to session")
-        self.apply_btn.setToolTip("Write cameras, depth and board to session.json (detections are redone)")
-        self.apply_btn.clicked.connect(self._apply)
-        hb.addStretch(1)
-        hb.addWidget(self.apply_btn)
-        outer.addLayout(hb)
 
         self._preview_timer = QTimer(self)
         self._preview_timer.setSingleShot(True)

@@ -12,7 +12,7 @@ read-out; a module per view would import the canvas and little else.
 from __future__ import annotations
 
 import numpy as np
-from PySide6.QtCore import QPointF, QRectF, Qt, QTimer, Signal
+from PySide6.QtCore import QEvent, QPointF, QRectF, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QImage, QPainter, QPen, QPixmap, QPolygonF, QTransform
 from PySide6.QtWidgets import (
     QFrame, QGraphicsItem, QGraphicsLineItem, QGraphicsPolygonItem, QGraphicsScene, QGraphicsView, QGridLayout,
@@ -347,7 +347,10 @@ class TitledView(QWidget):
         self.label = QLabel(title)
         self.label.setStyleSheet("font-weight: bold;")
         self.view = ImageView(title)
-        self.label.setMinimumWidth(40)  # a long title is cut, never widens the grid
+        # a long title wraps onto a second line, never widens the grid ("hyperspectral (reflectance,
+        # 100 bands, 640x576)" was cut in a third of a 1280 px window)
+        self.label.setWordWrap(True)
+        self.label.setMinimumWidth(40)
         self.bar = ColourBar()
         lay.addWidget(self.label)
         lay.addWidget(self.bar)  # its own row: beside the title it squeezed the title and the side panel
@@ -412,6 +415,7 @@ class ViewGrid(QWidget):
         if list(self.views) == names:
             for n in names:
                 self.views[n].label.setText(titles.get(n, n))
+            self._align_titles()
             return
         for tv in self.views.values():
             self.grid.removeWidget(tv)
@@ -427,6 +431,25 @@ class ViewGrid(QWidget):
             tv.view.hovered.connect(lambda r, c, nm=name: self.hovered.emit(nm, r, c))
             if self.linked:
                 self.link.add(tv.view)
+            tv.label.installEventFilter(self)
+        self._align_titles()
+
+    def eventFilter(self, obj, event) -> bool:  # noqa: N802 (Qt name)
+        if event.type() in (QEvent.Type.Resize, QEvent.Type.Show) and isinstance(obj, QLabel):  # a title's width
+            self._align_titles()
+        return False
+
+    def _align_titles(self) -> None:
+        """The titles of one grid row take the height of its tallest (wrapped) one, so that the
+        row's images line up."""
+        rows: dict[int, list[TitledView]] = {}
+        for tv in self.views.values():
+            if tv.label.isVisible():  # laid out: its width is the column's (shown, it resizes again)
+                rows.setdefault(self.grid.getItemPosition(self.grid.indexOf(tv))[0], []).append(tv)
+        for tvs in rows.values():
+            h = max(tv.label.heightForWidth(tv.label.width()) for tv in tvs)
+            for tv in tvs:
+                tv.label.setMinimumHeight(h)
 
     def set_image(self, name: str, rgb: np.ndarray) -> None:
         self.views[name].view.set_rgb8(rgb)

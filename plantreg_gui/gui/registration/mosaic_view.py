@@ -53,9 +53,13 @@ class MosaicView(QWidget):
         self._flick_timer.timeout.connect(self._flick)
         self._flick_state = 0
 
-        for c in (self.mode, self.a, self.b):  # narrow windows: the combos give way, not the window
+        for c in (self.mode, self.a, self.b):
+            # as wide as their longest entry where there is room ("Mosaic (a" was cut at 1280 px),
+            # down to four characters in a narrow window: the combos give way, not the window
             c.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
             c.setMinimumContentsLength(4)
+            c.setMinimumWidth(c.minimumSizeHint().width())
+            c.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToContents)
         top = QHBoxLayout()
         top.addWidget(QLabel("Mode"))
         top.addWidget(self.mode)
@@ -73,14 +77,19 @@ class MosaicView(QWidget):
         top.addSpacing(8)
         top.addWidget(self._alpha_label)
         top.addWidget(self.alpha)
-        top.addWidget(self.flicker)
         top.addStretch(1)
         self.caption = QLabel("")
+        self.caption.setWordWrap(True)  # a narrow window wraps it rather than widening
+        # flicker beside the caption (which says what is shown): in the top row it left the mode
+        # combo too little room at 1280 px
+        bottom = QHBoxLayout()
+        bottom.addWidget(self.caption, 1)
+        bottom.addWidget(self.flicker)
         lay = QVBoxLayout(self)
         lay.setContentsMargins(2, 2, 2, 2)
         lay.addLayout(top)
         lay.addWidget(self.view, 1)
-        lay.addWidget(self.caption)
+        lay.addLayout(bottom)
 
         for w in (self.mode, self.a, self.b):
             w.currentIndexChanged.connect(self.update_view)

@@ -1,0 +1,251 @@
+"""Issue 21, the technician's pass in a 1280 x 720 window (a laptop; under Xvfb): texts cut and
+controls below the fold. Each test measures what the technician looked at in the main window at
+that size -- a label's whole text shown, a control inside the visible part of its page, the
+strings the heat map paints -- and failed on the code before the fix."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.gui
+
+LAPTOP = (1280, 720)
+
+
+def _wait(pred, timeout: float = 120.0) -> None:
+    from test_gui_workspace import _wait as wait  # the event-loop wait of the workspace tests
+
+    wait(None, pred, timeout)
+
+
+def _settle(qapp, n: int = 5) -> None:
+    for _ in range(n):
+        qapp.processEvents()
+
+
+def text_shown(label) -> bool:
+    """``label`` shows its whole text: wrapped, it needs no more height than it has; on one line,
+    no more width than it has."""
+    if label.wordWrap():
+        return label.heightForWidth(label.width()) <= label.height() + 1
+    return label.fontMetrics().horizontalAdvance(label.text()) <= label.contentsRect().width()
+
+
+def inside_viewport(widget, scroll) -> bool:
+    """``widget`` lies wholly inside the visible part of the scroll area ``scroll``."""
+    from PySide6.QtCore import QPoint, QRect
+
+    vp = scroll.viewport()
+    top_left = widget.mapTo(vp, QPoint(0, 0))
+    return vp.rect().contains(QRect(top_left, widget.size()))
+
+
+@pytest.fixture(scope="module")
+def demo_solved(demo_dir, tmp_path_factory):
+    """The demo's calibration session (a copy) detected, calibrated and tabulated in this process,
+    as the wizard's worker jobs return it: (session, detections, calibration, report)."""
+    from plantreg_gui.core.calibration import Session, calibrate, detect_session, error_tables
+
+    folder = tmp_path_factory.mktemp("laptop") / "session"
+    shutil.copytree(demo_dir / "calibration", folder)
+    session = Session.load(folder)
+    detections = {d.key: d for d in detect_session(session)}
+    cal = calibrate(session, detections)
+    return session, detections, cal, error_tables(session, cal, detections)
+
+
+@pytest.fixture
+def window(qapp, no_qt_leaks):
+    """The main window at a laptop's size, shown."""
+    from plantreg_gui.gui.main_window import MainWindow
+
+    w = MainWindow()
+    w.resize(*LAPTOP)
+    w.show()
+    _settle(qapp)
+    assert (w.width(), w.height()) == LAPTOP
+    yield w
+    w.wizard.shutdown()
+    w.workspace.shutdown()
+    w.close()
+    w.deleteLater()
+
+
+def _wizard_on(window, qapp, solved, page: int):
+    """The wizard tab showing ``page`` of the solved demo (no worker runs: the model holds it all)."""
+    session, detections, cal, report = solved
+    wz = window.wizard
+    window.tabs.setCurrentWidget(wz)
+    wz.model.set_session(session)
+    for d in detections.values():
+        wz.model.put_detection(d, None)
+    wz.model.set_calibration(cal)
+    wz.model.set_report(report)
+    wz.go_to_page(page)
+    assert not wz.is_busy()
+    _settle(qapp)
+    return wz, wz.pages[page - 1], wz.stack.currentWidget()
+
+
+def test_page1_warning_and_save_are_in_view(window, qapp, demo_solved):
+    """Item 3: with a symmetric board the warning and 'Save changes to session' were below the
+    fold of page 1 (the page scrolled; nothing showed they were there)."""
+    wz, page, scroll = _wizard_on(window, qapp, demo_solved, 1)
+    page.columns.setValue(page.rows.value() + 6)  # 14 x 8: both even, symmetric
+    _settle(qapp)
+    assert page.message.isVisible() and "symmetric" in page.message.text()
+    assert page.apply_btn.isEnabled()
+    assert scroll.verticalScrollBar().value() == 0
+    for w in (page.message, page.apply_btn):
+        assert inside_viewport(w, scroll), w
+    assert text_shown(page.message)
+
+
+def test_page4_heat_map_texts_are_whole(window, qapp, demo_solved, monkeypatch):
+    """Item 2: the heat maps' titles and captions were elided ("least certai…", "hatched…") in
+    the four panels of a 1280 x 720 window. Every title and caption the map paints must fit
+    where it is painted."""
+    from PySide6.QtCore import QRect, QRectF
+
+    from plantreg_gui.gui.calibration import charts
+
+    painted = []
+
+    class Recording(charts.QPainter):
+        def drawText(self, *args):  # noqa: N802 - Qt name
+            if isinstance(args[0], (QRect, QRectF)) and isinstance(args[-1], str):
+                rect, text = QRectF(args[0]), args[-1]
+                flags = int(getattr(args[1], "value", args[1])) if len(args) == 3 else 0
+                need = self.fontMetrics().boundingRect(rect.toAlignedRect(), flags, text)
+                fits = need.width() <= rect.width() + 1 and need.height() <= rect.height() + 1
+                painted.append((text, fits or (text, rect.getRect(), need.getRect())))
+            elif isinstance(args[-1], str):
+                painted.append((args[-1], True))
+            return super().drawText(*args)
+
+    wz, page, _scroll = _wizard_on(window, qapp, demo_solved, 4)
+    umap = page.umap
+    assert umap.isVisible() and umap.width() < 500  # four panels in the space a laptop leaves
+    monkeypatch.setattr(charts, "QPainter", Recording)
+    umap.repaint()
+    texts = [t for t, _ok in painted]
+    assert not [t for t in texts if "…" in t]
+    assert not [ok for t, ok in painted if ok is not True and " " in t]  # titles and captions (not tick labels)
+    for m in charts_titles(demo_solved):
+        assert m in texts  # each camera's title, whole
+    assert any("hatched" in t and "no board" in t for t in texts)
+
+
+def charts_titles(solved) -> list[str]:
+    from plantreg_gui.gui.calibration import results
+
+    return [m["title"] for m in results.uncertainty_maps(solved[2])]
+
+
+def test_page5_fits_the_width_and_its_legend_names_every_camera(window, qapp, demo_solved):
+    """Item 1: page 5 was wider than a 1280 px window (two long group titles), so the 3D view's
+    legend in its top right corner was cut off; the legend is now a label under the view."""
+    wz, page, scroll = _wizard_on(window, qapp, demo_solved, 5)
+    _wait(lambda: page.view3d.n_frusta == len(demo_solved[2].rig.cameras) or page.view3d.error is not None, 60)
+    _settle(qapp)
+    assert scroll.horizontalScrollBar().maximum() == 0  # nothing to the right of the window's edge
+    assert inside_viewport(page.view3d, scroll)
+    for name in demo_solved[2].rig.names:
+        assert name in page.legend.text()
+    assert page.legend.isVisible() and text_shown(page.legend) and inside_viewport(page.legend, scroll)
+
+
+def test_red_cells_are_explained(qtbot):
+    """Item 5: on the Lepton 3.5 + ZED 2i set page 5 shows rgb -> thermal red (0.44 px on the
+    120 x 160 thermal image: normalised 0.44 * 1000 / sqrt(120 * 160) = 3.18) with no word on
+    what red means. A report with those figures (the published set's, docs/calibration.md) must
+    say which cell is red, what red means and what commonly causes it; one without a red cell
+    says nothing."""
+    from PySide6.QtCore import QObject, Signal
+
+    from plantreg_gui.gui.calibration.extrinsics_page import ExtrinsicsPage
+    from plantreg_gui.gui.calibration.widgets import GRADE_MAX, grade_colour
+    from plantreg_gui.models.calibration import WizardModel
+
+    class Actions(QObject):
+        busy_changed = Signal(bool)
+
+        def is_busy(self) -> bool:
+            return False
+
+    def cell(px, w, h):
+        return {"px": px, "normalized": px * 1000 / np.sqrt(w * h)}
+
+    sizes = {"rgb": (1280, 720), "thermal": (120, 160)}
+    report = {"extrinsic": {"rgb": {"thermal": cell(0.44, *sizes["thermal"])},
+                            "thermal": {"rgb": cell(2.58, *sizes["rgb"])}},
+              "cameras": {c: {"width": w, "height": h, "normalization": 1000 / np.sqrt(w * h)}
+                          for c, (w, h) in sizes.items()},
+              "views": {"extrinsic": {"rgb": {"thermal": {"t_1": 0.2, "t_2": 0.9, "t_3": 0.5, "t_4": 0.1}}}}}
+    assert report["extrinsic"]["rgb"]["thermal"]["normalized"] == pytest.approx(3.175, abs=1e-3)
+    m = WizardModel()
+    page = ExtrinsicsPage(m, Actions())
+    qtbot.addWidget(page)
+    page.resize(1050, 600)
+    page.show()
+    m.set_report(report)
+    page.refresh()
+    assert grade_colour(3.175) == grade_colour(GRADE_MAX)  # the cell is red
+    note = page.red_note.text()
+    assert page.red_note.isVisible()
+    assert "rgb → thermal 0.44 px of thermal's 120 × 160 = 3.18 normalised" in note
+    assert "thermal → rgb" not in note  # 2.69: orange, not red
+    assert "(worst views t_2, t_3, t_1)" in note
+    assert "per 1000 px of the target image" in note and "same moment" in note
+    report["extrinsic"]["rgb"]["thermal"] = cell(0.30, *sizes["thermal"])  # 2.17: no red cell
+    m.set_report(report)
+    page.refresh()
+    assert not page.red_note.isVisible() and page.red_note.text() == ""
+
+
+def _registered_window(window, qapp, demo_registered, view: str):
+    from conftest import workspace_session_outputs
+
+    ws = window.workspace
+    loaded, reg = workspace_session_outputs(demo_registered)
+    ws.session.apply_loaded(loaded)
+    ws._registered(reg)
+    ws.set_view(view)
+    _settle(qapp)
+    return ws
+
+
+def test_mosaic_mode_reads_whole(window, qapp, demo_registered):
+    """Item 4: the mosaic's Mode combo read "Mosaic (a" in a 1280 px window."""
+    from PySide6.QtWidgets import QComboBox
+
+    ws = _registered_window(window, qapp, demo_registered, "mosaic")
+    mv = ws.views["mosaic"]
+    for combo in (mv.mode, mv.a, mv.b):
+        probe = QComboBox()  # the same entries, as wide as the longest needs
+        probe.setFont(combo.font())
+        probe.addItems([combo.itemText(i) for i in range(combo.count())])
+        probe.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToContents)
+        assert combo.width() >= probe.sizeHint().width(), (combo.currentText(), combo.width())
+        probe.deleteLater()
+
+
+def test_side_by_side_titles_and_read_out_are_whole(window, qapp, demo_registered):
+    """Item 6: in the side-by-side view at 1280 px the hyperspectral view's title was cut, and so
+    was the end of the cursor's read-out in the status bar (five cameras, case and area)."""
+    ws = _registered_window(window, qapp, demo_registered, "side-by-side")
+    grid = ws.views["side-by-side"]
+    assert "hyperspectral" in grid.views
+    for name, tv in grid.views.items():
+        assert text_shown(tv.label), (name, tv.label.text(), tv.label.width())
+    s = ws.session
+    r = s.result
+    rows, cols = np.nonzero(r.cases[s.masks_source] > 0)  # a pixel with a case: the longest read-out
+    s.hover("target", int(rows[len(rows) // 2]), int(cols[len(cols) // 2]))
+    _settle(qapp)
+    assert "case:" in s.readout and "area:" in s.readout
+    assert ws.readout.text().replace("\u00a0", " ") == s.readout
+    assert text_shown(ws.readout), ws.readout.text()
