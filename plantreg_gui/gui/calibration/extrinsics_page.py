@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QEvent, Qt
 from PySide6.QtWidgets import QGroupBox, QHeaderView, QLabel, QSplitter, QVBoxLayout, QWidget
 
 from . import results
@@ -42,6 +42,8 @@ class ExtrinsicsPage(WizardPage):
         gl.addWidget(grade_legend())
         # what a red cell means, and why it may be red here (hidden without red cells)
         self.red_note = banner()
+        self._sizing = False
+        self.red_note.installEventFilter(self)  # its whole text, at any width (see eventFilter)
         gl.addWidget(self.red_note)
         ll.addWidget(g, 3)
         g2 = QGroupBox("Camera poses in the rig frame")
@@ -72,6 +74,26 @@ class ExtrinsicsPage(WizardPage):
         self.model.calibration_changed.connect(self.refresh_later)
         self.model.report_changed.connect(self.refresh_later)
 
+    def eventFilter(self, obj, event) -> bool:  # noqa: N802 (Qt name)
+        # a wrapped label in a scrolled page gets squeezed below the height its text needs (the
+        # note's first and last lines were cut at 1280 x 720): it asks for that height, the page scrolls
+        if obj is self.red_note and event.type() in (QEvent.Type.Resize, QEvent.Type.Show) and not self._sizing:
+            self._sizing = True  # setting the height resizes the note at once (a top-level page: recursion)
+            try:
+                need = self._note_height()
+                if need > 0 and need != self.red_note.minimumHeight():
+                    self.red_note.setMinimumHeight(need)
+            finally:
+                self._sizing = False
+        return False
+
+    def _note_height(self) -> int:
+        """The red note's height for its width; a line more, as its style sheet's padding and border
+        are not counted (its last line was still cut)."""
+        if not self.red_note.text():
+            return 0
+        return self.red_note.heightForWidth(self.red_note.width()) + self.red_note.fontMetrics().lineSpacing()
+
     def refresh(self) -> None:
         cal, rep = self.model.calibration, self.model.report
         if rep is None:
@@ -86,6 +108,7 @@ class ExtrinsicsPage(WizardPage):
         note = results.red_cells_note(rep, cal if self.model.calibration_ready() else None) if rep is not None else ""
         self.red_note.setText(note)
         self.red_note.setVisible(bool(note))
+        self.red_note.setMinimumHeight(self._note_height())
         if cal is not None:
             rig = cal.rig
             self.poses.clear()
@@ -112,6 +135,8 @@ class ExtrinsicsPage(WizardPage):
             self.poses.horizontalHeader().setStretchLastSection(True)
             self.poses.resizeRowsToContents()
             h = self.poses.horizontalHeader().height() + sum(self.poses.rowHeight(i) for i in range(len(rig.cameras)))
+            # nine columns may need the horizontal scroll bar: keep every camera's row visible (as page 4)
+            h += self.poses.horizontalScrollBar().sizeHint().height()
             self.poses.setFixedHeight(h + 2 * self.poses.frameWidth() + 2)
             if self._drawn is not cal:
                 self._drawn = cal

@@ -12,7 +12,6 @@ is in the Qt-free :class:`~.session.RegistrationSession`.
 from __future__ import annotations
 
 import json
-import re
 import shutil
 import tempfile
 from pathlib import Path
@@ -44,14 +43,6 @@ from .views import VIEWS, view_key
 RECENT_KEY = "workspace/recent"
 DISPLAY_KEY = "workspace/display"
 MAX_RECENT = 10
-
-
-def wrap_between_values(text: str) -> str:
-    """The session's read-out (values separated by runs of two or more spaces) with the spaces
-    inside each value made non-breaking: a wrapped read-out breaks between values, never inside
-    one ("thermal: 20.77 °C" stays on one line)."""
-    parts = re.split(r"( {2,})", text)
-    return "".join(p if i % 2 else p.replace(" ", "\u00a0") for i, p in enumerate(parts))
 
 
 # ---------------------------------------------------------------------- empty views
@@ -251,8 +242,8 @@ class RegistrationWorkspace(QWidget):
         self.readout = QLabel("")
         self.readout.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         self.readout.setMinimumWidth(10)  # a long read-out never widens the window ...
-        # ... it wraps onto a second line, between two values (the cursor's read-out of five cameras
-        # with case and area was cut at 1280 px); two lines always, so the views keep their size
+        # ... it wraps onto a second line (the cursor's read-out of five cameras with case and area
+        # was cut at 1280 px); two lines always, so the views keep their size
         self.readout.setWordWrap(True)
         self.readout.setFixedHeight(2 * self.readout.fontMetrics().lineSpacing() + 2)
         self.status.addWidget(self.readout, 1)
@@ -340,7 +331,7 @@ class RegistrationWorkspace(QWidget):
 
     def _cursor_moved(self) -> None:
         s = self.session
-        self.readout.setText(wrap_between_values(s.readout))
+        self.readout.setText(s.readout)
         self.readout.setToolTip(s.readout)
         if s.spectrum is not None:
             self.spectrum.set_spectrum(*s.spectrum)
