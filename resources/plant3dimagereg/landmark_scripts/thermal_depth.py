@@ -57,3 +57,21 @@ for name, X in models.items():
     cu, *_ = np.linalg.lstsq(X, du, rcond=None); cv_, *_ = np.linalg.lstsq(X, dv, rcond=None)
     print(f"{name:20s} LOO median {np.median(r):.2f} px p90 {np.percentile(r, 90):.2f}; coef u {np.round(cu, 2)} v {np.round(cv_, 2)}")
 print(f"raw: median {np.median(np.hypot(du, dv)):.2f}")
+
+# is it the depth reading? each landmark moved along its infrared ray (0.4-1.3 m): the best depth and
+# how far the read thermal pixel stays off the epipolar line
+from plantreg_gui.core.data.landmarks import LandmarkSet  # noqa: E402
+from plantreg_gui.core.data.recording import Recording  # noqa: E402
+
+ir, th = rig.depth(), rig.camera("thermal")
+print("along the infrared ray:")
+for d in sorted(rows, key=lambda d: d["z_m"]):
+    ls = LandmarkSet.load(RES / f"landmarks{'' if d['set'] == 'fit' else d['set']}.json")
+    lm = ls.recordings[d["recording"]][d["index"]]
+    o, ray = ir.rays_rig(np.array([lm.depth_uv], float))
+    zs = np.linspace(0.4, 1.3, 901)
+    uv_t, _ = th.project(o + zs[:, None] * (ray[0] / ray[0][2]))  # points at infrared depth zs
+    e = np.linalg.norm(uv_t - np.asarray(lm.cameras["thermal"]), axis=1)
+    j = int(np.nanargmin(e))
+    print(f"  {d['set']:14s} {d['recording'].split('/')[-1]:15s} z {d['z_m']:.3f} ({d['residual_px']:5.1f} px)"
+          f" -> best z {zs[j]:.3f}: {e[j]:4.1f} px off the epipolar line")
