@@ -116,9 +116,10 @@ def test_export_into_the_recording_is_refused_before_asking(registered_workspace
 
     ws = registered_workspace
     asked = _answer(monkeypatch, False)
-    with pytest.raises(InputError, match="would replace an input"):
+    with pytest.raises(InputError, match="would replace an input") as e:
         ws.export(demo_dir / "recording")
     assert not asked and not ws.is_busy()
+    assert "--" not in str(e.value)  # the app asks before replacing: no command-line flag in its dialog
 
 
 def test_redrawn_region_does_not_report_cancelled(registered_workspace):

@@ -149,6 +149,20 @@ def test_save_round_trip(world, tmp_path):
     assert np.allclose(Rig.load(r).camera(CAM).t_cam_rig, s.rig.camera(CAM).t_cam_rig)
 
 
+def test_a_recording_the_landmarks_file_names_but_is_missing_names_the_landmarks_file(demo_dir, tmp_path):
+    """The page opened on a landmarks file whose recording folder is gone: the message names the
+    landmarks file (which the user can edit) and the recording it names, not only the folder."""
+    from plantreg_gui.core.errors import InputError
+
+    lm = tmp_path / "landmarks.json"
+    lm.write_text(json.dumps({"format": "plantreg.landmarks", "version": 1, "recordings": {
+        "gone/plant07": {"points": [{"depth_uv": [100, 100], "cameras": {}}]}}}))
+    with pytest.raises(InputError) as e:
+        LandmarkSession.load(demo_dir / "rig.json", lm)
+    msg = str(e.value)
+    assert msg.startswith(str(lm)) and "'gone/plant07'" in msg and str(tmp_path / "gone" / "plant07") in msg
+
+
 def test_nudging_the_depth_camera_is_refused(world):
     from plantreg_gui.core.errors import InputError
 

@@ -35,7 +35,7 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
-from ..core.errors import InputError
+from ..core.errors import InputError, show_path
 from ..core.data.landmarks import Landmark, LandmarkSet
 from ..core.progress import Reporter, ensure_reporter
 from ..core.data.recording import Recording
@@ -173,8 +173,15 @@ class LandmarkSession:
         if key is None:
             raise InputError("no recording is open")
         if key not in self._recordings:
-            rec = Recording.load(self.landmarks.folder(key))
-            rec.check(self.rig, need_depth=True)
+            folder = self.landmarks.folder(key)
+            try:
+                rec = Recording.load(folder)
+                rec.check(self.rig, need_depth=True)
+            except InputError as e:  # a recording the landmarks file names: say which file names it
+                if self.landmarks.path is None:
+                    raise
+                where = show_path(e.path) if e.path is not None else show_path(folder)
+                raise InputError(f"recording '{key}' it names: {e.detail} ({where})", self.landmarks.path) from None
             self._recordings[key] = rec
         return self._recordings[key]
 

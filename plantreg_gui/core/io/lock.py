@@ -280,15 +280,17 @@ def _one(lp: Path, out: Path, what: str, mode: str = FILE) -> Iterator[None]:
 
 @contextmanager
 def claim_output(out: str | Path, what: str = "output", *, folder: bool = False, overwrite: bool = False,
-                 inputs=(), into: bool = False, lock_what: str | None = None) -> Iterator[Path]:
+                 inputs=(), into: bool = False, lock_what: str | None = None,
+                 replace_flag: str | None = "--overwrite") -> Iterator[Path]:
     """How a command takes an output, one mechanism for all: the shared output-path check
     (:func:`~.paths.check_output_location`: not an input, not a special file, writable, free or
     ``overwrite``), then the output's lock (a folder that is not written ``into`` is locked as
     replaced whole), held for the block. Yields the checked path. ``what`` names the output in
-    messages (``lock_what`` in the lock's, when it differs)."""
+    messages (``lock_what`` in the lock's, when it differs); ``replace_flag`` as there."""
     from .paths import check_output_location
 
-    out = check_output_location(out, what, folder=folder, overwrite=overwrite, inputs=inputs, into=into)
+    out = check_output_location(out, what, folder=folder, overwrite=overwrite, inputs=inputs, into=into,
+                                replace_flag=replace_flag)
     with output_lock(out, what=lock_what or what, into=into, whole=folder and not into):
         yield out
 

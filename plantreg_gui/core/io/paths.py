@@ -191,7 +191,8 @@ def check_destination(out: str | Path, what: str = "output", *, folder: bool = F
 
 
 def check_output_location(out: str | Path, what: str = "output", *, folder: bool = False,
-                          overwrite: bool = False, inputs: Iterable[str | Path] = (), into: bool = False) -> Path:
+                          overwrite: bool = False, inputs: Iterable[str | Path] = (), into: bool = False,
+                          replace_flag: str | None = "--overwrite") -> Path:
     """Validate an output path before any expensive work; raises :class:`InputError` naming it.
 
     Refused, besides :func:`check_destination`: a path that is one of ``inputs`` or of the paths
@@ -203,7 +204,8 @@ def check_output_location(out: str | Path, what: str = "output", *, folder: bool
     creating and removing a hidden temporary file there, which also catches read-only file
     systems and root-squashed mounts that permission bits do not show). ``into``: the command
     writes inside an existing folder ``out`` without replacing it (``plantreg batch``): an
-    existing folder is accepted as it is.
+    existing folder is accepted as it is. ``replace_flag``: how messages name the way to replace
+    an output (the desktop app, which asks instead, passes None: no command-line flag in a dialog).
     """
     out = check_destination(out, what, folder=folder)
     out_r = resolve(out, f"{what} path")
@@ -214,8 +216,9 @@ def check_output_location(out: str | Path, what: str = "output", *, folder: bool
         p_r = _resolved_or_none(p)
         if p_r is not None and (p_r == out_r or (inside_counts and out_r in p_r.parents)):
             inside = "" if p_r == out_r else ", which is inside it"
+            never = f"{replace_flag} never replaces an input" if replace_flag else "an input is never replaced"
             raise InputError(f"the {what} would replace an input of this command ({p}{inside}); choose a location "
-                             "outside the inputs (--overwrite never replaces an input)", out)
+                             f"outside the inputs ({never})", out)
     if folder and not into:
         try:
             cwd = _resolved_or_none(os.getcwd())
@@ -226,9 +229,11 @@ def check_output_location(out: str | Path, what: str = "output", *, folder: bool
                              "folder as a whole: name a new folder (e.g. out)", out)
     if os.path.lexists(out) and not (out.is_symlink() and not out.exists()) and not into:
         if folder and any(out.iterdir()) and not overwrite:
-            raise InputError(f"{what} folder exists and is not empty (choose another, or pass --overwrite)", out)
+            how = f", or pass {replace_flag}" if replace_flag else ""
+            raise InputError(f"{what} folder exists and is not empty (choose another{how})", out)
         if not folder and not overwrite:
-            raise InputError(f"{what} file exists (choose another name, or pass --overwrite to replace it)", out)
+            how = f", or pass {replace_flag} to replace it" if replace_flag else ""
+            raise InputError(f"{what} file exists (choose another name{how})", out)
         if overwrite and folder and out.is_dir() and not out.is_symlink() and os.path.ismount(out):
             raise InputError(f"{what} folder is a mount point and cannot be replaced; choose a folder inside it", out)
     base = _nearest_existing(out if into and out.is_dir() else out.parent)

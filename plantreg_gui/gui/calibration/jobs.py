@@ -135,9 +135,10 @@ def save_job(calibration, session, report, excluded: set[Key], rig_path: Path, r
         for i, f in enumerate(files):
             if i <= 1:  # the rig and the report
                 claims.enter_context(claim_output(f, "output", overwrite=True, inputs=session.inputs(),
-                                                  lock_what="calibration output"))
+                                                  lock_what="calibration output",
+                                                  replace_flag=None))
             else:  # the report's tables follow the report's lock
-                check_output_location(f, "output", overwrite=True, inputs=session.inputs())
+                check_output_location(f, "output", overwrite=True, inputs=session.inputs(), replace_flag=None)
         return _save(rig, rig_path, calibration, session, report, report_path, progress)
 
 

@@ -560,7 +560,7 @@ class RegistrationWorkspace(QWidget):
         if s.recording is not None:
             keep += [Path(p) for p in s.recording.paths.values()]
         # the one output check, before "Replace it?" rather than after Yes (the dialog asks about a non-empty folder)
-        check_output_location(out, "output", folder=True, overwrite=True, inputs=keep)
+        check_output_location(out, "output", folder=True, overwrite=True, inputs=keep, replace_flag=None)
         if folder_is_nonempty(out) and not overwrite:
             ans = QMessageBox.question(self, "Replace folder?",
                                        f"{out} exists and is not empty.\nReplace it with this export?",
