@@ -176,7 +176,7 @@ def main():
                   f" | LOPairO {stats(rp)}")
             print(f"     f {pf[6]:.1f} c ({pf[7]:.1f}, {pf[8]:.1f}) k1 {pf[9]:+.3f} k2 {pf[10]:+.3f}")
     elif cmd == "heldout":
-        ev = load_pairs(EVAL_FILES + sys.argv[2:], rig)
+        ev = load_pairs(EVAL_FILES + [str(Path(a).resolve()) for a in sys.argv[2:]], rig)
         print(f"held out: {len(ev)} thermal pairs")
         print(f"rig.json   {stats(residuals(p0, ev))}  " + " ".join(f"{x:.2f}" for x in np.hypot(*residuals(p0, ev).T)))
         for name, free in MODELS.items():
