@@ -12,7 +12,10 @@ rule): README "Session 13", written before any fit.
   python s13_thermal_fit.py heldout [NEW.json ...]   every model fitted to the pool, on the held-out
                                             independent pairs (s11c + the session-13 files given)
   python s13_thermal_fit.py write MODEL OUT.json     the rig with MODEL's thermal camera fitted to the pool
-  python s13_thermal_fit.py timing          per-plant mean residual of the LOPO folds (timing hypothesis)
+  python s13_thermal_fit.py timing          per-plant mean and spread of the LOPO residuals (timing hypothesis:
+                                            a per-recording offset would show as a large mean, per-leaf motion as spread)
+  python s13_thermal_fit.py floor           in-sample floor of the most flexible smooth models (no priors)
+  python s13_thermal_fit.py oracle          reader-to-reader floor on the s11c features also read into the pool
 (from this folder; PYTHONPATH = the project root)
 """
 from __future__ import annotations
