@@ -1,4 +1,5 @@
-"""The s11c independent reader's pairs (resources/plant3dimagereg/landmarks_independent_s11.json): every kept
+"""The independent readers' pairs (resources/plant3dimagereg/landmarks_independent_s11.json, read in session 11c,
+and landmarks_s13.json, read in session 13; both held out of every fit): every kept
 pair is the mean of two readings that agree within the protocol's tolerance (2 px infrared, 4 px other camera),
 moved only along its stated inward direction, and its infrared point lies on leaf depth by plantreg's own check
 (not the ground, not a flying pixel) -- the properties that make it usable as held-out ground truth."""
@@ -21,28 +22,35 @@ RES = ROOT / "resources" / "plant3dimagereg"
 DATA = ROOT.parent / "shared" / "data" / "plant3dimagereg"
 TOL = {"ir": 2.0, "thermal": 4.0, "hyperspectral": 4.0}
 SCALE = {"thermal": 2.0, "hyperspectral": 1.8}  # other-camera px per infrared px of the inward step
-READINGS = json.loads((RES / "landmark_scripts" / "eye_readings_s11c.json").read_text())["readings"]
+# landmarks file -> (its eye readings, the session prefix of each point's note, the fewest kept pairs)
+SETS = {"landmarks_independent_s11.json": ("eye_readings_s11c.json", "s11c", 8),
+        "landmarks_s13.json": ("eye_readings_s13.json", "s13", 1)}
 
 
-def _kept():
-    return [(k, r) for k, r in READINGS.items() if r.get("kept")]
+def _readings(f):
+    return json.loads((RES / "landmark_scripts" / SETS[f][0]).read_text())["readings"]
 
 
-def test_the_file_loads_and_names_only_the_rigs_cameras():
+def _kept(f=None):
+    return [(g, k, r) for g in ([f] if f else SETS) for k, r in _readings(g).items() if r.get("kept")]
+
+
+@pytest.mark.parametrize("f", sorted(SETS))
+def test_the_file_loads_and_names_only_the_rigs_cameras(f):
     rig = Rig.load(RES / "rig_nominal.json")
-    ls = LandmarkSet.load(RES / "landmarks_independent_s11.json", rig, check_recordings=True)
-    assert ls.count() == len(_kept()) >= 8
+    ls = LandmarkSet.load(RES / f, rig, check_recordings=True)
+    assert ls.count() == len(_kept(f)) >= SETS[f][2]
     assert set(ls.camera_names) <= {"thermal", "hyperspectral"}
 
 
-@pytest.mark.parametrize("key,r", _kept(), ids=[k for k, _ in _kept()])
-def test_each_pair_is_the_mean_of_two_agreeing_readings_moved_along_its_inward_direction(key, r):
+@pytest.mark.parametrize("f,key,r", _kept(), ids=[f"{f}:{k}" for f, k, _ in _kept()])
+def test_each_pair_is_the_mean_of_two_agreeing_readings_moved_along_its_inward_direction(f, key, r):
     cam = r.get("cam", "thermal")
     for c in ("ir", cam):
         assert np.hypot(*np.subtract(r["r1"][c], r["r2"][c])) <= TOL[c]
-    ls = LandmarkSet.load(RES / "landmarks_independent_s11.json")
+    ls = LandmarkSet.load(RES / f)
     plant, name = key.split("/")
-    (lm,) = [p for p in ls.recordings[f"recordings/{plant}"] if p.note.startswith(f"s11c {name}:")]
+    (lm,) = [p for p in ls.recordings[f"recordings/{plant}"] if p.note.startswith(f"{SETS[f][1]} {name}:")]
     d = np.asarray(r["inward"], float) / np.linalg.norm(r["inward"])
     step = r["inward_step_ir_px"]
     assert 0 <= step <= 6
@@ -54,9 +62,10 @@ def test_each_pair_is_the_mean_of_two_agreeing_readings_moved_along_its_inward_d
 
 
 @pytest.mark.skipif(not (DATA / "lidar_depthmap_np").is_dir(), reason=f"the Plant3DImageReg data set is not at {DATA}")
-def test_every_infrared_point_reads_the_leaf_not_the_ground():
+@pytest.mark.parametrize("f", sorted(SETS))
+def test_every_infrared_point_reads_the_leaf_not_the_ground(f):
     rig = Rig.load(RES / "rig_nominal.json")
-    ls = LandmarkSet.load(RES / "landmarks_independent_s11.json")
+    ls = LandmarkSet.load(RES / f)
     for key, pts in ls.recordings.items():
         depth = Recording.load(ls.folder(key), rig).depth_m(rig.depth_scale)
         for lm in pts:
