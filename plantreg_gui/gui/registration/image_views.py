@@ -468,13 +468,14 @@ class SpectrumPlot(QWidget):
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
-        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
         from matplotlib.figure import Figure
+
+        from ..resize_hold import canvas_class
 
         # fixed margins: a constrained layout is re-solved on every draw (a stall of the GUI thread)
         self.figure = Figure(figsize=(4, 1.6), dpi=90)
         self.figure.subplots_adjust(left=0.17, right=0.97, top=0.86, bottom=0.25)
-        self.canvas = FigureCanvasQTAgg(self.figure)
+        self.canvas = canvas_class()(self.figure)  # redraws at a new size in a turn of its own
         self.ax = self.figure.add_subplot(111)
         lay = QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
