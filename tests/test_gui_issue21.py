@@ -723,3 +723,78 @@ def test_3d_read_out_states_every_length_in_mm_and_the_pick_distance(registered_
     cube = next(ln for ln in text.splitlines() if ln.startswith("hyperspectral:"))
     assert cube.endswith("reflectance")
     assert cv.point_size.suffix() == " px"
+
+
+def _settle(pred, timeout: float = 30.0) -> None:
+    """Run the event loop until ``pred()``, then a little longer (the repaints it asked for)."""
+    import time
+
+    from PySide6.QtWidgets import QApplication
+
+    _wait(pred, timeout)
+    t = time.monotonic()
+    while time.monotonic() - t < 0.3:
+        QApplication.processEvents()
+        time.sleep(0.01)
+
+
+def _not_blank(rgb) -> bool:
+    import numpy as np
+
+    rgb = np.asarray(rgb)[..., :3].reshape(-1, 3)
+    return len(np.unique(rgb[:: max(1, len(rgb) // 20000)], axis=0)) > 20  # a picture, not a fill
+
+
+def test_3d_view_redraws_at_its_new_size_after_a_resize(registered_workspace):
+    """Resizes are held (gui/resize_hold.py: the old frame shown stretched meanwhile); once the
+    event loop settles the 3D view's render window has the widget's size and shows the cloud."""
+    import numpy as np
+
+    ws = registered_workspace
+    ws.set_view("3d")
+    cv = ws.cloud_view
+    _settle(lambda: cv.plotter is not None and not cv.building)
+    p = cv.plotter
+    for size in ((1900, 1200), (1300, 850)):
+        before = p.size()
+        ws.resize(*size)
+        from PySide6.QtWidgets import QApplication
+
+        QApplication.processEvents()
+        if p.size() != before and getattr(p, "_ctx", None) is not None:  # a QOpenGLWidget interactor
+            assert p.resize_hold.held  # the render at the new size waits for a turn of its own
+        _settle(lambda: not p.resize_hold.held)
+        dpr = p.devicePixelRatioF()
+        assert tuple(p.GetRenderWindow().GetSize()) == (round(p.width() * dpr), round(p.height() * dpr))
+        img = np.asarray(p.screenshot(None, return_img=True))
+        assert img.shape[:2] == (round(p.height() * dpr), round(p.width() * dpr))
+        assert _not_blank(img)
+
+
+def test_matplotlib_canvas_redraws_at_its_new_size_after_a_resize(qtbot):
+    """The shared canvas (gui/resize_hold.py): a resize of a drawn canvas is held (its paint
+    shows the old picture), then the figure is drawn at the widget's size."""
+    import numpy as np
+    from matplotlib.figure import Figure
+    from PySide6.QtWidgets import QApplication
+
+    from plantreg_gui.gui.resize_hold import canvas_class
+
+    fig = Figure(figsize=(4, 1.6), dpi=90)
+    ax = fig.add_subplot(111)
+    x = np.linspace(400, 1000, 100)
+    ax.plot(x, np.sin(x / 50), color="#2a7f2a")
+    ax.set_title("spectrum")
+    c = canvas_class()(fig)
+    qtbot.addWidget(c)
+    c.resize(360, 150)
+    c.show()
+    _settle(lambda: getattr(c, "renderer", None) is not None)
+    c.resize(700, 320)
+    QApplication.processEvents()
+    assert c.resize_hold.held and (c.renderer.width, c.renderer.height) != (700, 320)
+    c.grab()  # a paint while held draws the old picture, stretched
+    _settle(lambda: not c.resize_hold.held)
+    dpr = c.device_pixel_ratio
+    assert (c.renderer.width, c.renderer.height) == (round(700 * dpr), round(320 * dpr))
+    assert _not_blank(np.asarray(c.buffer_rgba()))

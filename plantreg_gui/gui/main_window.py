@@ -133,6 +133,9 @@ class MainWindow(QMainWindow):
             prep = getattr(w, "prepare_screenshot", None)
             if prep is not None:
                 prep()
+        from .resize_hold import release_all
+
+        release_all()  # views resized a moment ago draw at their size now
         QApplication.processEvents()
         import errno
 

@@ -31,14 +31,40 @@ STAGE_GAP_MS = 15
 @functools.cache
 def _interactor_class() -> type:
     """pyvistaqt's ``QtInteractor`` whose paints fill the background colour, without a VTK
-    render, while ``first_frame_held`` (see :func:`release_first_frame`). Made on first use:
-    pyvistaqt is imported lazily."""
+    render, while ``first_frame_held`` (see :func:`release_first_frame`), and whose resizes are
+    held (``gui/resize_hold.py``): while a window is resized its paints show the last frame,
+    stretched, and the new framebuffers and the render at the new size wait for a turn of
+    their own. Made on first use: pyvistaqt is imported lazily."""
+    from PySide6.QtCore import QRect
     from pyvistaqt import QtInteractor
+
+    from .resize_hold import ResizeHold
 
     class Interactor(QtInteractor):
         first_frame_held = True
 
+        def __init__(self, *args, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            # pyvistaqt's QOpenGLWidget interactor renders into framebuffers of its own (an
+            # older, native-window one has no _ctx and resizes at once)
+            self.resize_hold = ResizeHold(self, lambda e: QtInteractor.resizeEvent(self, e),
+                                          ready=lambda: getattr(self, "_ctx", None) is not None
+                                          and not self.first_frame_held)
+
+        def resizeEvent(self, event) -> None:  # noqa: N802 - Qt override
+            self.resize_hold.resize_event(event)
+
         def paintGL(self) -> None:  # noqa: N802 - Qt override
+            if self.resize_hold.held and hasattr(self, "_blit"):
+                # framebuffers and render window keep their old size: show VTK's last frame
+                # again (Qt may have discarded the widget's framebuffer), no render
+                rw = self.GetRenderWindow()
+                st = rw.GetState()
+                st.Reset()
+                st.Push()
+                self._blit(self.defaultFramebufferObject(), QRect(0, 0, *rw.GetSize()))
+                st.Pop()
+                return
             if not self.first_frame_held:
                 super().paintGL()
                 return

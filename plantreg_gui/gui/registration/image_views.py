@@ -440,12 +440,20 @@ class ViewGrid(QWidget):
         return False
 
     def _align_titles(self) -> None:
-        """The titles of one grid row take the height of its tallest (wrapped) one, so that the
-        row's images line up."""
+        """The titles of one grid row take the height of its tallest (wrapped) one, and a view
+        without a colour bar keeps the bar's room when another view of its row has one (a colour
+        image beside a depth map sat a bar's height higher), so that the row's images line up."""
         rows: dict[int, list[TitledView]] = {}
         for tv in self.views.values():
+            row = self.grid.getItemPosition(self.grid.indexOf(tv))[0]
+            any_bar = any(not t.bar.isHidden() for t in self.views.values()
+                          if self.grid.getItemPosition(self.grid.indexOf(t))[0] == row)
+            sp = tv.bar.sizePolicy()
+            if sp.retainSizeWhenHidden() != any_bar:
+                sp.setRetainSizeWhenHidden(any_bar)
+                tv.bar.setSizePolicy(sp)
             if tv.label.isVisible():  # laid out: its width is the column's (shown, it resizes again)
-                rows.setdefault(self.grid.getItemPosition(self.grid.indexOf(tv))[0], []).append(tv)
+                rows.setdefault(row, []).append(tv)
         for tvs in rows.values():
             h = max(tv.label.heightForWidth(tv.label.width()) for tv in tvs)
             for tv in tvs:
@@ -468,13 +476,14 @@ class SpectrumPlot(QWidget):
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
-        from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
         from matplotlib.figure import Figure
+
+        from ..resize_hold import canvas_class
 
         # fixed margins: a constrained layout is re-solved on every draw (a stall of the GUI thread)
         self.figure = Figure(figsize=(4, 1.6), dpi=90)
         self.figure.subplots_adjust(left=0.17, right=0.97, top=0.86, bottom=0.25)
-        self.canvas = FigureCanvasQTAgg(self.figure)
+        self.canvas = canvas_class()(self.figure)  # redraws at a new size in a turn of its own
         self.ax = self.figure.add_subplot(111)
         lay = QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
@@ -547,6 +556,7 @@ class RawImagesView(ViewGrid):
         for L in s.raw:
             self.set_image(L.name, s.raw_renders[L.name])
             self.views[L.name].bar.set_bar(*s.colour_bar(L))
+        self._align_titles()  # the bars shown now
 
     def _display(self, name: str) -> None:
         L = self.session.layer(name, registered=False)
@@ -577,6 +587,7 @@ class SideBySideView(ViewGrid):
         for L in s.layers:
             self.set_image(L.name, s.renders[L.name])
             self.views[L.name].bar.set_bar(*s.colour_bar(L))
+        self._align_titles()  # the bars shown now
         if list(self.views) != before:  # new views: they draw regions too
             for tv in self.views.values():
                 tv.view.region_drawn.connect(s.set_region)
