@@ -763,9 +763,12 @@ def test_3d_view_redraws_at_its_new_size_after_a_resize(registered_workspace):
         QApplication.processEvents()
         if p.size() != before and getattr(p, "_ctx", None) is not None:  # a QOpenGLWidget interactor
             assert p.resize_hold.held  # the render at the new size waits for a turn of its own
-        _settle(lambda: not p.resize_hold.held)
+        _settle(lambda: not p.resize_hold.held and p._fbo_size is None)
         dpr = p.devicePixelRatioF()
         assert tuple(p.GetRenderWindow().GetSize()) == (round(p.width() * dpr), round(p.height() * dpr))
+        if getattr(p, "_ctx", None) is not None:  # the widget's own framebuffer has the new size too
+            fb = p.grabFramebuffer()
+            assert (fb.width(), fb.height()) == (round(p.width() * dpr), round(p.height() * dpr))
         img = np.asarray(p.screenshot(None, return_img=True))
         assert img.shape[:2] == (round(p.height() * dpr), round(p.width() * dpr))
         assert _not_blank(img)

@@ -35,34 +35,80 @@ def _interactor_class() -> type:
     held (``gui/resize_hold.py``): while a window is resized its paints show the last frame,
     stretched, and the new framebuffers and the render at the new size wait for a turn of
     their own. Made on first use: pyvistaqt is imported lazily."""
-    from PySide6.QtCore import QRect
+    from PySide6.QtCore import QRect, QSize
+    from PySide6.QtGui import QResizeEvent
     from pyvistaqt import QtInteractor
 
     from .resize_hold import ResizeHold
 
     class Interactor(QtInteractor):
         first_frame_held = True
+        _fbo_size = None  # QSize of the widget's framebuffer while a two-turn resize is under way
 
         def __init__(self, *args, **kwargs) -> None:
             super().__init__(*args, **kwargs)
             # pyvistaqt's QOpenGLWidget interactor renders into framebuffers of its own (an
             # older, native-window one has no _ctx and resizes at once)
-            self.resize_hold = ResizeHold(self, lambda e: QtInteractor.resizeEvent(self, e),
+            self.resize_hold = ResizeHold(self, self._apply_resize,
                                           ready=lambda: getattr(self, "_ctx", None) is not None
-                                          and not self.first_frame_held)
+                                          and not self.first_frame_held, complete=self._finish_resize)
+
+        def _apply_resize(self, event) -> None:
+            """The held resize, in two turns. With software OpenGL, VTK's first render at a new
+            size (its new framebuffers: 30-200 ms at 2560 x 1440) and the window's composition
+            of the new frame (60-150 ms) added up to 250-400 ms in one turn. So VTK renders at
+            the new size now, into its own framebuffers, while the widget keeps its old
+            framebuffer (showing the new frame, stretched); the widget's new framebuffer, a
+            render and the composition follow in a later turn."""
+            if not hasattr(self, "_blit") or getattr(self, "_ctx", None) is None:
+                QtInteractor.resizeEvent(self, event)
+                return
+            if self._fbo_size is None:
+                self._fbo_size = QSize(event.oldSize())
+            # a turn apart from the other held views' redraws (released by the same resizes)
+            QTimer.singleShot(STAGE_GAP_MS, self._render_at_new_size)
+
+        def _render_at_new_size(self) -> None:
+            try:
+                if self._fbo_size is None or self.resize_hold.held:
+                    return
+                self.makeCurrent()
+                self._in_paint = True  # the render's frame event asks for no repaint
+                try:
+                    self.resizeGL(self.width(), self.height())
+                    self.GetRenderWindow().Render()
+                finally:
+                    self._in_paint = False
+                QTimer.singleShot(STAGE_GAP_MS, self._finish_resize)
+            except RuntimeError:  # deleted meanwhile
+                pass
+
+        def _finish_resize(self) -> None:
+            try:
+                if self._fbo_size is None or self.resize_hold.held:  # held again: applied later
+                    return
+                old, self._fbo_size = self._fbo_size, None
+                QtInteractor.resizeEvent(self, QResizeEvent(self.size(), old))
+                self.update()  # the window composes the new framebuffer
+            except RuntimeError:  # deleted meanwhile
+                pass
 
         def resizeEvent(self, event) -> None:  # noqa: N802 - Qt override
             self.resize_hold.resize_event(event)
 
         def paintGL(self) -> None:  # noqa: N802 - Qt override
-            if self.resize_hold.held and hasattr(self, "_blit"):
+            if (self.resize_hold.held or self._fbo_size is not None) and hasattr(self, "_blit"):
                 # framebuffers and render window keep their old size: show VTK's last frame
                 # again (Qt may have discarded the widget's framebuffer), no render
                 rw = self.GetRenderWindow()
                 st = rw.GetState()
                 st.Reset()
                 st.Push()
-                self._blit(self.defaultFramebufferObject(), QRect(0, 0, *rw.GetSize()))
+                # into the framebuffer's old size (VTK's frame may already have the new one)
+                fbo = self._fbo_size or self.resize_hold.old_size
+                dpr = self.devicePixelRatioF()
+                self._blit(self.defaultFramebufferObject(),
+                           QRect(0, 0, max(1, round(fbo.width() * dpr)), max(1, round(fbo.height() * dpr))))
                 st.Pop()
                 return
             if not self.first_frame_held:

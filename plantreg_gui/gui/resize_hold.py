@@ -41,10 +41,12 @@ class ResizeHold(QObject):
     picture yet) or while the widget is hidden is applied at once."""
 
     def __init__(self, widget: QWidget, apply: Callable[[QResizeEvent], None], ready: Callable[[], bool],
-                 hold_ms: int = HOLD_MS) -> None:
+                 hold_ms: int = HOLD_MS, complete: Callable[[], None] | None = None) -> None:
+        """``complete``: finishes now what ``apply`` left for a later turn (for :func:`release_all`)."""
         super().__init__(widget)
         self._widget = widget
         self._apply = apply
+        self._complete = complete
         self._ready = ready
         self._old: QSize | None = None  # the size the widget's picture was made for, while held
         self._timer = QTimer(self)
@@ -57,6 +59,11 @@ class ResizeHold(QObject):
     def held(self) -> bool:
         """A resize is waiting: the widget's picture is the one made for its old size."""
         return self._old is not None
+
+    @property
+    def old_size(self) -> QSize:
+        """The size the widget's picture was made for (its size now when nothing is held)."""
+        return QSize(self._old) if self._old is not None else self._widget.size()
 
     def resize_event(self, event: QResizeEvent) -> None:
         """Call from the widget's ``resizeEvent`` in place of the base class's."""
@@ -85,6 +92,8 @@ def release_all() -> None:
     for hold in list(_HOLDS):
         try:
             hold.release()
+            if hold._complete is not None:
+                hold._complete()
         except RuntimeError:  # its widget was deleted (the C++ side)
             pass
 
