@@ -801,3 +801,32 @@ def test_matplotlib_canvas_redraws_at_its_new_size_after_a_resize(qtbot):
     dpr = c.device_pixel_ratio
     assert (c.renderer.width, c.renderer.height) == (round(700 * dpr), round(320 * dpr))
     assert _not_blank(np.asarray(c.buffer_rgba()))
+
+
+def test_3d_view_closed_while_its_resize_is_under_way(registered_workspace):
+    """A resize of the 3D view finishes in later event-loop turns (gui/plotter3d.py: VTK's render
+    at the new size, then the widget's framebuffer); a view closed in between (File > Close,
+    another recording) must not raise in those turns (pytest-qt fails the test if one does)."""
+    import time
+
+    from PySide6.QtWidgets import QApplication
+
+    ws = registered_workspace
+    cv = ws.cloud_view
+    for stage in ("held", "rendered"):
+        ws.set_view("raw")
+        ws.set_view("3d")
+        _settle(lambda: cv.plotter is not None and not cv.building)
+        p = cv.plotter
+        ws.resize(ws.width() + 120, ws.height() + 40)
+        QApplication.processEvents()
+        if stage == "rendered" and getattr(p, "_ctx", None) is not None:
+            p.resize_hold.release()
+            p._render_at_new_size()  # VTK at the new size; the framebuffer's turn is pending
+            assert p._fbo_size is not None
+        cv.close_plotter()
+        assert cv.plotter is None
+        t = time.monotonic()
+        while time.monotonic() - t < 0.5:  # the pending turns run
+            QApplication.processEvents()
+            time.sleep(0.01)

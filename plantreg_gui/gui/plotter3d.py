@@ -72,11 +72,15 @@ def _interactor_class() -> type:
             try:
                 if self._fbo_size is None or self.resize_hold.held:
                     return
+                rw = self.GetRenderWindow()
+                if rw is None or getattr(self, "_ctx", None) is None:  # closed meanwhile
+                    self._fbo_size = None
+                    return
                 self.makeCurrent()
                 self._in_paint = True  # the render's frame event asks for no repaint
                 try:
                     self.resizeGL(self.width(), self.height())
-                    self.GetRenderWindow().Render()
+                    rw.Render()
                 finally:
                     self._in_paint = False
                 QTimer.singleShot(STAGE_GAP_MS, self._finish_resize)
@@ -88,6 +92,8 @@ def _interactor_class() -> type:
                 if self._fbo_size is None or self.resize_hold.held:  # held again: applied later
                     return
                 old, self._fbo_size = self._fbo_size, None
+                if self.GetRenderWindow() is None:  # closed meanwhile
+                    return
                 QtInteractor.resizeEvent(self, QResizeEvent(self.size(), old))
                 self.update()  # the window composes the new framebuffer
             except RuntimeError:  # deleted meanwhile
