@@ -249,3 +249,35 @@ def test_side_by_side_titles_and_read_out_are_whole(window, qapp, demo_registere
     assert "case:" in s.readout and "area:" in s.readout
     assert ws.readout.text() == s.readout
     assert text_shown(ws.readout), ws.readout.text()
+
+
+def test_page5_screenshot_shows_the_frusta(window, qapp, demo_solved, tmp_path):
+    """The window's screenshot (as `plantreg-gui --screenshot` and figures/wizard_screenshots.py
+    take it) shows the 3D view's picture at 1280 x 720: page 5's layout settles while the view
+    is still building, so its first resizes can come before VTK's first frame. (A resize split
+    over later turns once left the view black in figures/wizard_screenshots.py on the Lepton
+    set; this test did not reproduce that trigger, with the demo or with a third of the Lepton
+    pairs: it guards the outcome, the screenshot looked at is the check of the cause.)"""
+    import time
+
+    from PIL import Image
+    from PySide6.QtCore import QPoint
+
+    solved = demo_solved
+    wz, page, scroll = _wizard_on(window, qapp, solved, 5)
+    _wait(lambda: page.view3d.n_frusta == len(solved[2].rig.cameras) or page.view3d.error is not None, 60)
+    assert page.view3d.error is None
+    t = time.monotonic()
+    while time.monotonic() - t < 1.0:
+        qapp.processEvents()
+        time.sleep(0.02)
+    out = tmp_path / "page5.png"
+    window.save_screenshot(out)
+    img = np.asarray(Image.open(out).convert("RGB"))
+    dpr = window.devicePixelRatioF()
+    widget = page.view3d.plotter or page.view3d
+    at = widget.mapTo(window, QPoint(0, 0))
+    x, y, w, h = (round(v * dpr) for v in (at.x(), at.y(), widget.width(), widget.height()))
+    assert w > 100 and h > 100
+    crop = img[y:y + h, x:x + w].reshape(-1, 3)
+    assert len(np.unique(crop[:: max(1, len(crop) // 20000)], axis=0)) > 20  # a picture, not a fill

@@ -44,6 +44,7 @@ def _interactor_class() -> type:
     class Interactor(QtInteractor):
         first_frame_held = True
         _fbo_size = None  # QSize of the widget's framebuffer while a two-turn resize is under way
+        _drawn = False  # VTK has drawn a frame in the widget's paint
 
         def __init__(self, *args, **kwargs) -> None:
             super().__init__(*args, **kwargs)
@@ -60,7 +61,10 @@ def _interactor_class() -> type:
             the new size now, into its own framebuffers, while the widget keeps its old
             framebuffer (showing the new frame, stretched); the widget's new framebuffer, a
             render and the composition follow in a later turn."""
-            if not hasattr(self, "_blit") or getattr(self, "_ctx", None) is None:
+            if not hasattr(self, "_blit") or getattr(self, "_ctx", None) is None or not self.isVisible() \
+                    or not self._drawn:  # hidden, or VTK has not drawn in the widget yet: at once, as Qt
+                # does (VTK's first frame rendered outside the widget's paint left it black)
+                self._fbo_size = None
                 QtInteractor.resizeEvent(self, event)
                 return
             if self._fbo_size is None:
@@ -119,6 +123,7 @@ def _interactor_class() -> type:
                 return
             if not self.first_frame_held:
                 super().paintGL()
+                self._drawn = True
                 return
             ctx = self.context()
             if ctx is None:
