@@ -281,3 +281,30 @@ def test_page5_screenshot_shows_the_frusta(window, qapp, demo_solved, tmp_path):
     assert w > 100 and h > 100
     crop = img[y:y + h, x:x + w].reshape(-1, 3)
     assert len(np.unique(crop[:: max(1, len(crop) // 20000)], axis=0)) > 20  # a picture, not a fill
+
+
+def test_page5_tables_are_whole_at_1280(window, qapp, demo_solved):
+    """Page 5 at 1280 x 720 with the demo's four cameras: both tables in view without a
+    sideways scroll (the poses' last column, "σ rig px med / worst", and "→ hyperspectral" were
+    cut), every camera name whole, and the poses table above the fold (it sat under the red
+    cells' note)."""
+    wz, page, scroll = _wizard_on(window, qapp, demo_solved, 5)
+    _wait(lambda: page.view3d.n_frusta == len(demo_solved[2].rig.cameras) or page.view3d.error is not None, 60)
+    _settle(qapp, 20)
+    for table in (page.table, page.poses):
+        table.horizontalScrollBar().setValue(0)
+        assert table.horizontalScrollBar().maximum() == 0, table
+        hh = table.horizontalHeader()
+        fm = hh.fontMetrics()
+        for j in range(table.columnCount()):
+            words = table.horizontalHeaderItem(j).text().split("\n")
+            assert max(fm.horizontalAdvance(w) for w in words) <= hh.sectionSize(j), words
+    fm = page.poses.fontMetrics()
+    bold = page.poses.item(0, 0).font()
+    from PySide6.QtGui import QFontMetrics
+
+    fmb = QFontMetrics(bold)
+    for i in range(page.poses.rowCount()):
+        for line in page.poses.item(i, 0).text().split("\n"):
+            assert fmb.horizontalAdvance(line) <= page.poses.columnWidth(0), line
+    assert inside_viewport(page.poses, scroll)

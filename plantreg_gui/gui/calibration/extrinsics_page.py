@@ -38,21 +38,24 @@ class ExtrinsicsPage(WizardPage):
         gl.addWidget(_note("Distance of the target camera's corner to the epipolar line of the origin "
                            "camera's corner."))
         self.table = make_table()
-        gl.addWidget(self.table, 1)
+        gl.addWidget(self.table)
         gl.addWidget(grade_legend())
-        # what a red cell means, and why it may be red here (hidden without red cells)
-        self.red_note = banner()
-        self._sizing = False
-        self.red_note.installEventFilter(self)  # its whole text, at any width (see eventFilter)
-        gl.addWidget(self.red_note)
-        ll.addWidget(g, 3)
+        ll.addWidget(g)
         g2 = QGroupBox("Camera poses in the rig frame")
         g2l = QVBoxLayout(g2)
         g2l.addWidget(_note("The rig frame is the reference camera's frame: optical centre, rotation angle, "
                             "and their standard errors (±)."))
         self.poses = make_table()
         g2l.addWidget(self.poses)
-        ll.addWidget(g2, 0)
+        ll.addWidget(g2)
+        # what a red cell means, and why it may be red here (hidden without red cells); under both
+        # tables: its ten lines above the poses pushed them below a 720 px window's fold
+        self.red_note = banner()
+        self.red_note.setAlignment(Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignTop)
+        self._sizing = False
+        self.red_note.installEventFilter(self)  # its whole text, at any width (see eventFilter)
+        ll.addWidget(self.red_note)
+        ll.addStretch(1)
         split.addWidget(left)
         right = QWidget()
         rl = QVBoxLayout(right)
@@ -68,7 +71,11 @@ class ExtrinsicsPage(WizardPage):
         cap = _note("Camera frusta and the calibrated board poses. Drag to rotate, wheel to zoom.")
         rl.addWidget(cap)
         split.addWidget(right)
-        split.setSizes([700, 620])
+        # the tables need ~560 px for four cameras' names and the poses' nine columns; the 3D view
+        # takes the rest (at 1280 px a 50/50 split cut "→ hyperspectral" and the names)
+        split.setStretchFactor(0, 3)
+        split.setStretchFactor(1, 2)
+        split.setSizes([780, 520])
         lay.addWidget(split, 1)
         self._drawn = None
         self.model.calibration_changed.connect(self.refresh_later)
@@ -105,6 +112,10 @@ class ExtrinsicsPage(WizardPage):
                        if self.model.report_stale else "")
             names = results.camera_names(cal, self.model.session)
             fill_matrix(self.table, names, results.table(rep, "extrinsic"), "extrinsic")
+            self.table.resizeRowsToContents()  # as tall as its rows: no stretched cells, no scroll bar
+            self.table.setFixedHeight(self.table.horizontalHeader().sizeHint().height()
+                                      + sum(self.table.rowHeight(i) for i in range(self.table.rowCount()))
+                                      + 2 * self.table.frameWidth() + 2)
         note = results.red_cells_note(rep, cal if self.model.calibration_ready() else None) if rep is not None else ""
         self.red_note.setText(note)
         self.red_note.setVisible(bool(note))
@@ -112,11 +123,23 @@ class ExtrinsicsPage(WizardPage):
         if cal is not None:
             rig = cal.rig
             self.poses.clear()
-            cols = ["camera", "x mm", "y mm", "z mm", "rotation °", "distance mm", "± rot. °", "± transl. mm",
-                    "σ rig px med/worst"]
+            # two-line headers: nine one-line ones needed a sideways scroll even at 1500 px
+            cols = [("camera", "camera name (the depth camera and the reference camera are marked)"),
+                    ("x\nmm", "optical centre in the rig frame, x (mm)"),
+                    ("y\nmm", "optical centre in the rig frame, y (mm)"),
+                    ("z\nmm", "optical centre in the rig frame, z (mm)"),
+                    ("rotation\n°", "rotation angle from the reference camera (degrees)"),
+                    ("distance\nmm", "distance of the optical centre from the reference camera's (mm)"),
+                    ("± rot.\n°", "standard error of the rotation (degrees)"),
+                    ("± transl.\nmm", "standard error of the translation (mm)"),
+                    ("σ rig px\nmed / worst", "the pose's uncertainty seen in this camera's image: the "
+                     "standard error of a projected point due to the rig pose, median and worst over the "
+                     "image at the working distance (px)")]
             unc = results.uncertainty(cal)
             self.poses.setColumnCount(len(cols))
-            self.poses.setHorizontalHeaderLabels(cols)
+            self.poses.setHorizontalHeaderLabels([c for c, _ in cols])
+            for j, (_c, tip) in enumerate(cols):
+                self.poses.horizontalHeaderItem(j).setToolTip(tip)
             self.poses.setRowCount(len(rig.cameras))
             for i, c in enumerate(rig.cameras):
                 ctr = c.center_rig * 1000
@@ -125,14 +148,16 @@ class ExtrinsicsPage(WizardPage):
                 ref = u is None or u.rotation_deg is None
                 rig_sig = u.summary("rig") if u is not None else None
                 tags = [t for t, on in (("depth", c.name == rig.depth_camera), ("reference", ref)) if on]
-                vals = [c.name + (f" ({', '.join(tags)})" if tags else ""),
+                vals = [c.name + (f"\n({', '.join(tags)})" if tags else ""),
                         fmt(ctr[0], 1), fmt(ctr[1], 1), fmt(ctr[2], 1), fmt(ang, 2), fmt(np.linalg.norm(ctr), 1),
                         "–" if ref else f"{u.rotation_deg:.3f}", "–" if ref else f"{u.translation_mm:.2f}",
                         f"{rig_sig[0]:.2f} / {rig_sig[1]:.2f}" if rig_sig and not ref else "–"]
                 for j, v in enumerate(vals):
                     self.poses.setItem(i, j, item(v, bold=(j == 0)))
-            self.poses.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
-            self.poses.horizontalHeader().setStretchLastSection(True)
+            hh = self.poses.horizontalHeader()
+            hh.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+            hh.setSectionResizeMode(0, QHeaderView.ResizeMode.Stretch)  # the names take what is left
+            hh.setStretchLastSection(False)  # (a stretched last section could be narrower than its text)
             self.poses.resizeRowsToContents()
             h = self.poses.horizontalHeader().height() + sum(self.poses.rowHeight(i) for i in range(len(rig.cameras)))
             # nine columns may need the horizontal scroll bar: keep every camera's row visible (as page 4)
