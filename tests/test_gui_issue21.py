@@ -187,6 +187,11 @@ def test_units_come_from_the_rig(workspace, demo_registered):
 
     rgb8 = Layer("hs", "hyperspectral", np.full((2, 2, 3), 7, np.uint8), None, "8-bit render")
     assert rgb8.value_text(0, 0) == "(7, 7, 7) 8-bit render"  # a 3-band image: the unit said once
+    # a registered (resampled) render: one number of decimals per triple, not "(17, 34.09, 17)"
+    px = np.array([[[17.0, 34.0937, 17.0]], [[6.2071, 15.0, 9.0]]], np.float32)
+    reg_render = Layer("hs", "hyperspectral", px, None, "8-bit render")
+    assert reg_render.value_text(0, 0) == "(17.0, 34.1, 17.0) 8-bit render"
+    assert reg_render.value_text(1, 0) == "(6.2, 15.0, 9.0) 8-bit render"
     # the same camera stated in kelvin: K everywhere, never °C
     kelvin = rig.camera("thermal")
     old = dict(kelvin.extra)
@@ -830,3 +835,21 @@ def test_3d_view_closed_while_its_resize_is_under_way(registered_workspace):
         while time.monotonic() - t < 0.5:  # the pending turns run
             QApplication.processEvents()
             time.sleep(0.01)
+
+
+def test_3d_pick_hint_is_readable_at_1280(registered_workspace):
+    """The 3D view's "left-click a point" hint sat at the end of its tool bar and was cut to a
+    stray stroke at 1280 px; it now ends the read-out pane, wrapped, before and after a pick."""
+    from plantreg_gui.gui.registration.cloud_view import PICK_HINT
+
+    ws = registered_workspace
+    ws.resize(1280, 720)
+    ws.set_view("3d")
+    cv = ws.cloud_view
+    _settle(lambda: cv.plotter is not None and not cv.building)
+    cv.set_cloud(cv.cloud, None)
+    assert cv.info.text().endswith(PICK_HINT)
+    cv.show_point(0)
+    assert cv.info.text().endswith(PICK_HINT)
+    assert cv.info.isVisible() and cv.info.wordWrap()
+    assert cv.info.heightForWidth(cv.info.width()) <= cv.info.height()  # the whole text shown

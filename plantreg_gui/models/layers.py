@@ -90,6 +90,16 @@ def format_value(v: float, modality: str, unit: str | None = None) -> str:
     return f"{num} {unit}" if unit else num
 
 
+def _same_decimals(vals: list[float]) -> list[str]:
+    """A colour triple's values with one number of decimals (a registered render's values are
+    resampled: "(17, 34.09, 17)" read like a glitch): none if all are whole, else by the largest."""
+    if all(float(v).is_integer() for v in vals):
+        return [f"{v:.0f}" for v in vals]
+    m = max(abs(v) for v in vals)
+    d = 3 if m < 1 else 2 if m < 10 else 1 if m < 1000 else 0
+    return [f"{v:.{d}f}" for v in vals]
+
+
 @dataclass
 class Layer:
     """One displayable image: a camera's (raw or registered) image or the depth."""
@@ -156,7 +166,7 @@ class Layer:
         if display.shows_as_rgb(self.bands, self.modality):  # drawn as RGB (a 3-band cube too): its values
             if not np.all(np.isfinite(px.astype(np.float64))):
                 return "—"
-            vals = "(" + ", ".join(format_value(float(v), self.modality, "") for v in px) + ")"
+            vals = "(" + ", ".join(_same_decimals([float(v) for v in px])) + ")"
             return f"{vals} {self.unit}" if self.unit else vals  # the unit once, not per channel
         b = 0 if band is None else int(np.clip(band, 0, self.bands - 1))
         v = float(px[b])
@@ -265,7 +275,8 @@ class Cloud:
             if v.ndim == 1:
                 lines.append(f"{name}: {format_value(float(v[i]), self.modalities.get(name, name), self.units.get(name))}")
             elif v.shape[1] == 3:
-                lines.append(f"{name}: (" + ", ".join(f"{float(x):.4g}" for x in v[i]) + ")" + (f" {unit}" if unit else ""))
+                lines.append(f"{name}: (" + ", ".join(_same_decimals([float(x) for x in v[i]])) + ")"
+                             + (f" {unit}" if unit else ""))
             else:
                 x = np.asarray(v[i], np.float64)
                 if not np.isfinite(x).any():  # no value of this camera at the point

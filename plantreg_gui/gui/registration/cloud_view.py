@@ -11,13 +11,17 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
-    QCheckBox, QComboBox, QHBoxLayout, QLabel, QSizePolicy, QSpinBox, QSplitter, QVBoxLayout, QWidget,
+    QCheckBox, QComboBox, QHBoxLayout, QLabel, QSpinBox, QSplitter, QVBoxLayout, QWidget,
 )
 
 from ..plotter3d import Stages, first_frame_held, make_plotter, release_first_frame, repaint
 from ...models.layers import Cloud
 
 MESH_COLOURS = {"object mesh": "#3c9a3c", "uncertainty mesh": "#d040d0"}
+
+
+#: the last line of the read-out pane
+PICK_HINT = "Left-click a point to read all its values; a second click adds its distance to the first."
 
 
 class CloudView(QWidget):
@@ -57,10 +61,6 @@ class CloudView(QWidget):
             self.mesh_boxes[name] = cb
             top.addWidget(cb)
         top.addStretch(1)
-        self.hint = QLabel("Left-click a point to read all its values.")
-        self.hint.setMinimumWidth(10)  # cut on a narrow window, never widens it
-        self.hint.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
-        top.addWidget(self.hint)
 
         self.host = QWidget()
         self.host_layout = QVBoxLayout(self.host)
@@ -114,7 +114,10 @@ class CloudView(QWidget):
         self._tree = None
         self.picked_index = None
         n = 0 if cloud is None else len(cloud.points)
-        self.info.setText((note + "\n\n" if note else "") + f"{n:,} points." if cloud is not None else note)
+        # the hint at the end of the read-out pane, wrapped (in the tool bar it was cut to a
+        # stray stroke at 1280 px)
+        self.info.setText((note + "\n\n" if note else "") + f"{n:,} points.\n\n{PICK_HINT}"
+                          if cloud is not None else note)
         self._dirty = True
         if self.isVisible():
             self.show_staged()
@@ -336,13 +339,13 @@ class CloudView(QWidget):
             self._tree = cKDTree(self.cloud.points)
         _, i = self._tree.query(np.asarray(xyz, dtype=np.float64).reshape(3))
         previous, self.picked_index = self.picked_index, int(i)
-        self.info.setText(self.cloud.point_text(int(i), previous))  # with the distance to the last pick
+        self.info.setText(self.cloud.point_text(int(i), previous) + f"\n\n{PICK_HINT}")  # distance to the last pick
         return int(i)
 
     def show_point(self, i: int) -> None:
         """Read out cloud point ``i`` (no KD tree needed: for a known target pixel)."""
         self.picked_index = int(i)
-        self.info.setText(self.cloud.point_text(int(i)))
+        self.info.setText(self.cloud.point_text(int(i)) + f"\n\n{PICK_HINT}")
 
     # ------------------------------------------------------------------ the workspace's session
     needs = "cloud"
