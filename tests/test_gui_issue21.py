@@ -87,6 +87,9 @@ def test_file_close_and_recent_pair(registered_workspace, demo_dir):
     assert "Close" in [a.text() for a in ws.file_menu.actions()]
     ws.close_action.trigger()
     assert ws.rig is None and ws.recording is None and ws.result is None and not ws.raw
+    # nothing of the closed recording stays in the display panel (its histogram and note did)
+    assert ws.controls.histogram.isHidden() and ws.controls.histogram.counts is None
+    assert ws.controls.info.text() == ""
     assert not ws.register_button.isEnabled() and not ws.export_button.isEnabled()
     assert not ws.empty_notes["raw"].isHidden()
     ws._fill_recent()
@@ -367,6 +370,7 @@ def test_region_shapes_saved_and_loaded(registered_workspace, tmp_path):
     assert s.region is None
     ws.load_region(p)
     assert s.region == ("polygon", poly)
+    assert ws.readout.text().startswith("Loaded the region from")  # not "Saved the region to ..."
     _wait(lambda: s.region_stats is not None and not ws.is_busy())
     assert s.region_stats.pixels == pixels
     view = ws.sbs_grid.views["ir"].view
@@ -853,3 +857,52 @@ def test_3d_pick_hint_is_readable_at_1280(registered_workspace):
     assert cv.info.text().endswith(PICK_HINT)
     assert cv.info.isVisible() and cv.info.wordWrap()
     assert cv.info.heightForWidth(cv.info.width()) <= cv.info.height()  # the whole text shown
+
+
+def test_readout_flags_a_source_value_that_is_not_legitimate(registered_workspace):
+    """Technician pass (session 14, M1): hovering a target pixel where a source is occluded
+    (P2) showed the occluder's value with no mark, beside "hyperspectral case: P1 legitimate"
+    (the masks' source's case only). Each source's value now carries its case when it is not
+    P1, from the registration's case arrays (the truth here)."""
+    import numpy as np
+
+    from plantreg_gui.core.registration.cases import Case
+
+    s = registered_workspace.session
+    r = s.result
+    checked = 0
+    for src, cases in r.cases.items():
+        layer = s.layer(src)
+        if layer is None:
+            continue
+        for code in (Case.P2, Case.P31, Case.P32, Case.P1):
+            rows, cols = np.nonzero(cases == int(code))
+            for row, col in list(zip(rows.tolist(), cols.tolist()))[:: max(1, len(rows) // 5)][:5]:
+                if layer.value_text(row, col) == "—":
+                    continue
+                s.hover("target", row, col)
+                part = next(p for p in s.readout.split("   ") if p.startswith(f"{src}: "))
+                if code == Case.P1:
+                    assert "[" not in part, part
+                else:
+                    assert part.endswith(f"[{code.label}]"), part
+                checked += 1
+    assert any((c == int(Case.P2)).any() for c in r.cases.values())  # the demo has occlusions
+    assert checked >= 10
+
+
+def test_open_recent_keeps_absolute_paths(registered_workspace, demo_dir, monkeypatch, tmp_path):
+    """Technician pass (session 14, L1): a rig opened by a relative path was remembered as typed,
+    so started from another folder (the desktop menu) the entry vanished from Open recent."""
+    import os
+
+    ws = registered_workspace
+    monkeypatch.chdir(demo_dir.parent)
+    rel_rig = os.path.relpath(demo_dir / "rig.json")
+    rel_rec = os.path.relpath(demo_dir / "recording")
+    ws._add_recent("pair", f"{rel_rig}|{rel_rec}")
+    ws._add_recent("rig", rel_rig)
+    monkeypatch.chdir(tmp_path)  # started elsewhere
+    recent = ws.recent()
+    assert f"pair:{demo_dir / 'rig.json'}|{demo_dir / 'recording'}" in recent
+    assert f"rig:{demo_dir / 'rig.json'}" in recent

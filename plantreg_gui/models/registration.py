@@ -683,6 +683,16 @@ class RegistrationSession:
         s = self.settings_for(L.name)
         return s.bands[0] if s.bands is not None else L.middle_band
 
+    @staticmethod
+    def _case_flag(r: Any, name: str, row: int, col: int) -> str:
+        """The case label of source ``name`` at a target pixel when it is not P1 (legitimate) or
+        background; '' otherwise, or for a camera that is not a source of ``r``."""
+        cases = None if r is None else r.cases.get(name)
+        if cases is None or not (0 <= row < cases.shape[0] and 0 <= col < cases.shape[1]):
+            return ""
+        code = int(cases[row, col])
+        return "" if code in (int(Case.P1), int(Case.BACKGROUND)) else case_label(code)
+
     def hover(self, where: str, row: int, col: int) -> None:
         """The cursor is at (row, col) of ``where``: 'target' (the registered grid) or a raw layer's name.
         Leaving an image (row < 0) keeps the last cursor and read-out (the pixel under study)."""
@@ -692,9 +702,14 @@ class RegistrationSession:
             if not self.layers:
                 return
             parts = [f"x={col} y={row}"]
-            for L in self.layers:
-                parts.append(f"{L.name}: {L.value_text(row, col, self.band_for(L))}")
             r = self.result
+            for L in self.layers:
+                text = f"{L.name}: {L.value_text(row, col, self.band_for(L))}"
+                # a source's value that is not legitimate here says so beside it (an occluded
+                # thermal pixel carries the occluder's temperature; the one case shown after the
+                # values is the masks' source's only)
+                flag = self._case_flag(r, L.name, row, col)
+                parts.append(f"{text} [{flag}]" if flag and not text.endswith("—") else text)
             if r is not None and self.masks_source in r.cases:
                 h, w = r.shape
                 if 0 <= row < h and 0 <= col < w:
