@@ -10,6 +10,13 @@ import pytest
 
 os.environ.setdefault("QT_API", "pyside6")
 os.environ.setdefault("PYVISTA_OFF_SCREEN", "false")
+# the app's QSettings (Open recent, window state) of every test and of the programs the tests start
+# go to a folder of the run's own, never to the user's ~/.config (the technician's Open recent
+# listed /tmp/pytest-of-... entries); set before any QSettings is made
+if not os.environ.get("PLANTREG_TESTS_KEEP_CONFIG"):
+    import tempfile
+
+    os.environ["XDG_CONFIG_HOME"] = tempfile.mkdtemp(prefix="plantreg-tests-config-")
 
 # `shared/` lies beside the project root (as in CI); PLANTREG_SHARED_DATA overrides it
 SHARED = Path(os.environ.get("PLANTREG_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))

@@ -308,3 +308,90 @@ def test_page5_tables_are_whole_at_1280(window, qapp, demo_solved):
         for line in page.poses.item(i, 0).text().split("\n"):
             assert fmb.horizontalAdvance(line) <= page.poses.columnWidth(0), line
     assert inside_viewport(page.poses, scroll)
+
+
+
+@pytest.mark.parametrize("size", [LAPTOP, (1500, 950)])
+def test_page4_bar_chart_titles_are_whole(window, qapp, demo_solved, monkeypatch, size):
+    """Issue 21 (session 14): page 4's per-view bar-chart titles ("rgb: error per view (mean
+    ... px, dashed), 1 weak") were painted on one line centred on the plot area; wider than the
+    panel, their start was cut off at the chart's left edge (1280 x 720 and 1500 x 950). Every
+    title must be painted whole, inside the chart."""
+    from PySide6.QtCore import QRect, QRectF
+
+    from plantreg_gui.gui.calibration import charts
+
+    window.resize(*size)
+    _settle(qapp)
+    painted = []
+
+    class Recording(charts.QPainter):
+        def drawText(self, *args):  # noqa: N802 - Qt name
+            if isinstance(args[-1], str) and "error per view" in args[-1]:
+                if isinstance(args[0], (QRect, QRectF)):
+                    flags = int(getattr(args[1], "value", args[1])) if len(args) == 3 else 0
+                    need = QRectF(self.fontMetrics().boundingRect(QRectF(args[0]).toAlignedRect(), flags, args[-1]))
+                else:  # at a point: one line from there
+                    pt = args[0]
+                    need = QRectF(pt.x(), pt.y() - self.fontMetrics().ascent(),
+                                  self.fontMetrics().horizontalAdvance(args[-1]), self.fontMetrics().height())
+                painted.append((args[-1], need))
+            return super().drawText(*args)
+
+    wz, page, _scroll = _wizard_on(window, qapp, demo_solved, 4)
+    chart = page.chart
+    assert chart.isVisible()
+    monkeypatch.setattr(charts, "QPainter", Recording)
+    chart.repaint()
+    cams = [c for c in demo_solved[2].rig.names if chart.bars.get(c) or chart.excluded_bars.get(c)]
+    assert len(painted) == len(cams) >= 2
+    for cam in cams:
+        assert any(t.startswith(f"{cam}: error per view") for t, _r in painted)
+    for text, need in painted:
+        assert need.left() >= 0 and need.right() <= chart.width(), (text, need.getRect(), chart.width())
+        assert need.top() >= 0, (text, need.getRect())
+
+
+LEPTON_RED_NOTE = (  # the red note of page 5 on the Lepton 3.5 + ZED 2i set (tests/realcal.py), as shown
+    "Red cells (normalised error ≥ 3): rgb → thermal 0.44 px of thermal's 120 × 160 = 3.16 normalised "
+    "(worst views t_20251006_103851, t_20251006_103852, t_20251006_103914). Red means that the origin "
+    "camera's corners, carried through the calibrated rig, miss the target camera's corners by more than "
+    "3 px per 1000 px of the target image's size: on a small image a fraction of a pixel is already red. "
+    "Usual causes: the cameras did not see the board at the same moment (a hand-held board, cameras not "
+    "triggered together), a camera moved between views, or mislocated corners (look at the worst views on "
+    "page 3). thermal's corners fit the joint rig 4.3 × worse than its own lens model (0.75 against 0.18 px "
+    "per coordinate): its views disagree with one rigid rig, as when the board moves between the cameras' "
+    "exposures.")
+
+
+def test_page5_poses_table_in_view_with_a_long_red_note(window, qapp, demo_solved, monkeypatch):
+    """Issue 21 (session 14): on the Lepton + ZED set at 1280 x 720 the red cells' note (ten lines)
+    pushed the camera poses table below the fold: page 5 had to be scrolled to reach it. The table
+    must be in view without scrolling, and the note's whole text readable."""
+    from plantreg_gui.gui.calibration import results
+
+    monkeypatch.setattr(results, "red_cells_note", lambda *a, **k: LEPTON_RED_NOTE)
+    wz, page, scroll = _wizard_on(window, qapp, demo_solved, 5)
+    _wait(lambda: page.view3d.n_frusta == len(demo_solved[2].rig.cameras) or page.view3d.error is not None, 60)
+    _settle(qapp, 10)
+    assert page.red_note.isVisible() and page.red_note.text() == LEPTON_RED_NOTE
+    assert inside_viewport(page.poses, scroll)  # the note comes after both tables (the page may scroll to it)
+    assert page.poses.verticalScrollBar().maximum() == 0  # every camera's row
+    assert page.red_note.height() >= page.red_note.heightForWidth(page.red_note.width())  # whole text
+    assert inside_viewport(page.table, scroll)
+
+
+def test_page5_poses_table_fits_1500_wide(window, qapp, demo_solved):
+    """Issue 21 (session 14): page 5's poses table needed a sideways scroll for its last column
+    ("σ rig px med/worst") in a 1500 px window. Headers are short, on two lines, with tooltips."""
+    window.resize(1500, 950)
+    _settle(qapp)
+    wz, page, scroll = _wizard_on(window, qapp, demo_solved, 5)
+    _settle(qapp, 10)
+    t = page.poses
+    assert t.isVisible() and t.columnCount() == 9
+    assert t.horizontalScrollBar().maximum() == 0
+    hh = t.horizontalHeader()
+    assert hh.sectionPosition(8) + hh.sectionSize(8) <= t.viewport().width()
+    last = t.horizontalHeaderItem(8)
+    assert "σ rig px" in last.text() and "median" in last.toolTip() and "worst" in last.toolTip()

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 from PySide6.QtCore import QPointF, QRect, QRectF, Qt, Signal
-from PySide6.QtGui import QBrush, QColor, QFont, QPainter, QPen
+from PySide6.QtGui import QBrush, QColor, QFont, QFontMetricsF, QPainter, QPen
 from PySide6.QtWidgets import QSizePolicy, QWidget
 
 NORMAL = "#4c72b0"
@@ -83,12 +83,13 @@ def _draw_axes(p: QPainter, panel: _Panel, title: str, ylabel: str, xlabels: lis
     p.rotate(-90)
     p.drawText(QPointF(-fm.horizontalAdvance(ylabel) / 2, 0), ylabel)
     p.restore()
-    tf = QFont(small)
-    tf.setBold(True)
-    p.setFont(tf)
-    p.drawText(QRectF(r.left(), r.top() - fm.height() - 4, r.width(), fm.height() + 2),
-               Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextSingleLine, title)
-    p.setFont(small)
+    if title:
+        tf = QFont(small)
+        tf.setBold(True)
+        p.setFont(tf)
+        p.drawText(QRectF(r.left(), r.top() - fm.height() - 4, r.width(), fm.height() + 2),
+                   Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextSingleLine, title)
+        p.setFont(small)
 
 
 class _Chart(QWidget):
@@ -142,8 +143,29 @@ class PerViewChart(_Chart):
         return [c for c in list(self.bars) + [c for c in self.excluded_bars if c not in self.bars]
                 if self.bars.get(c) or self.excluded_bars.get(c)]
 
+    def _title(self, cam: str) -> str:
+        used, ex = self.bars.get(cam, {}), self.excluded_bars.get(cam, {})
+        weak = self._weak.get(cam, set())
+        m = self._mean.get(cam)
+        # short: with the uncertainty map beside it a panel is ~300 px wide
+        title = f"{cam}: error per view"
+        if m is not None and math.isfinite(m):
+            title += f" (mean {m:.3f} px, dashed)"
+        n_weak = sum(1 for q in used if q in weak)
+        if n_weak:
+            title += f", {n_weak} weak"
+        if ex:
+            title += f", {len(ex)} excluded ✖"
+        return title
+
+    def _title_font(self) -> QFont:
+        f = self._small()
+        f.setBold(True)
+        return f
+
     def _layout(self) -> list[tuple[str, _Panel, list[str]]]:
         self._rects.clear()
+        self._title_rects = {}
         cams = self._cams()
         out = []
         if not cams:
@@ -152,13 +174,19 @@ class PerViewChart(_Chart):
         nrow = math.ceil(len(cams) / ncol)
         W, H = self.width(), self.height()
         cw, ch = W / ncol, H / nrow
+        # a title wider than its cell wraps onto a second line over the whole cell (it was centred
+        # on the plot area, one line, and its start was cut off at the widget's left edge)
+        fm = QFontMetricsF(self._title_font())
+        two = any(fm.horizontalAdvance(self._title(c)) > cw - 8 for c in cams)
+        top_m = 2 * fm.lineSpacing() + 6 if two else 22
         for k, cam in enumerate(cams):
             i, j = divmod(k, ncol)
             used, ex = self.bars.get(cam, {}), self.excluded_bars.get(cam, {})
             poses = sorted(set(used) | set(ex))
             vals = [v for v in list(used.values()) + list(ex.values()) if math.isfinite(v)]
             top = max(vals + [self._mean.get(cam) or 0.0, 1e-3]) * 1.18
-            rect = QRectF(j * cw + 52, i * ch + 22, cw - 64, ch - 44)
+            rect = QRectF(j * cw + 52, i * ch + top_m, cw - 64, ch - top_m - 22)
+            self._title_rects[cam] = QRectF(j * cw + 4, i * ch + 1, cw - 8, top_m - 4)
             panel = _Panel(rect, len(poses), 0.0, top)
             for n, pose in enumerate(poses):
                 v = used.get(pose, ex.get(pose, float("nan")))
@@ -180,17 +208,12 @@ class PerViewChart(_Chart):
             used, ex = self.bars.get(cam, {}), self.excluded_bars.get(cam, {})
             weak = self._weak.get(cam, set())
             m = self._mean.get(cam)
-            # short: with the uncertainty map beside it a panel is ~300 px wide
-            title = f"{cam}: error per view"
-            if m is not None and math.isfinite(m):
-                title += f" (mean {m:.3f} px, dashed)"
-            n_weak = sum(1 for q in poses if q in weak and q in used)
-            if n_weak:
-                title += f", {n_weak} weak"
-            if ex:
-                title += f", {len(ex)} excluded ✖"
             labels = [q.replace("pose_", "") for q in poses]
-            _draw_axes(p, panel, title, "px", labels, small)
+            _draw_axes(p, panel, "", "px", labels, small)
+            p.setFont(self._title_font())
+            p.drawText(self._title_rects[cam], Qt.AlignmentFlag.AlignHCenter | Qt.AlignmentFlag.AlignBottom
+                       | Qt.TextFlag.TextWordWrap, self._title(cam))
+            p.setFont(small)
             for pose in poses:
                 r = self._rects[(cam, pose)]
                 if pose in used:

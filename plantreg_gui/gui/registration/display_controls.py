@@ -77,7 +77,8 @@ class Histogram(QWidget):
             inside = float(self.counts[(self.edges[:-1] >= limits[0]) & (self.edges[1:] <= limits[1])].sum())
             self.setToolTip(f"values {self.edges[0]:.4g}-{self.edges[-1]:.4g} {unit}; limits "
                             f"{limits[0]:.4g}-{limits[1]:.4g} {unit} (red); "
-                            f"{100 * inside / max(float(self.counts.sum()), 1):.0f} % of the pixels between them")
+                            f"{100 * inside / max(float(self.counts.sum()), 1):.0f} % of the pixels between them. "
+                            "Bar heights: log of the pixel count (a tail of 1 % shows)")
         self.update()
 
     def x_of(self, v: float) -> float:
@@ -100,6 +101,11 @@ class Histogram(QWidget):
         for i, v in enumerate(c):
             x0, x1 = int(i * w / n), max(int((i + 1) * w / n) - 1, int(i * w / n))
             p.fillRect(x0, int(h - v * (h - 2)), x1 - x0 + 1, int(v * (h - 2)), QColor("#8a8f98"))
+        f = p.font()
+        f.setPointSizeF(max(f.pointSizeF() * 0.75, 6.0))
+        p.setFont(f)
+        p.setPen(QColor("#444"))
+        p.drawText(3, p.fontMetrics().ascent() + 1, "log count")  # said on the widget, not only in its tip
         if self.limits is not None:
             p.setPen(QColor("#c00000"))
             for v in self.limits:
@@ -200,6 +206,10 @@ class DisplayControls(QGroupBox):
             self.layer.setCurrentText(keep)
         self.layer.blockSignals(False)
         self.setEnabled(bool(layers))
+        if not layers:  # closed: nothing of the last recording stays on show
+            self.histogram.set_data(None, None)
+            self.info.setText("")
+            self.limits_note.hide()
         self._show_layer()
 
     def settings_for(self, name: str) -> DisplaySettings:

@@ -694,6 +694,18 @@ class RegistrationWorkspace(QWidget):
         return [e for e in items if Path(e.partition(":")[2].partition("|")[0]).exists()]
 
     def _add_recent(self, kind: str, path: str) -> None:
+        # absolute paths: a path typed relative to one folder is gone when the app starts from
+        # another (the desktop menu), and the entry vanished from the list
+        def _abs(p: str) -> str:
+            return str(Path(p).expanduser().absolute())
+
+        first, _, second = path.partition("|")
+        if kind == "pair":
+            path = f"{_abs(first)}|{_abs(second)}"
+        elif kind == "plant3d":
+            path = f"{_abs(first)}|{second}"  # a folder and a plant's name
+        else:
+            path = _abs(path)
         entry = f"{kind}:{path}"
         items = [entry] + [e for e in self.recent() if e != entry]
         self._settings().setValue(RECENT_KEY, items[:MAX_RECENT])
@@ -830,6 +842,7 @@ class RegistrationWorkspace(QWidget):
             raise InputError(f"cannot read the region file ({getattr(e, 'strerror', None) or e})", path) from None
         s.set_region(*region_from_json(text, s.result.target, s.result.shape, path))
         self.set_view("side-by-side")
+        self.readout.setText(f"Loaded the region from {path}")  # not the last save's message
 
     def _region_dialog_start(self) -> str:
         rec = self.session.recording_path
