@@ -906,3 +906,41 @@ def test_open_recent_keeps_absolute_paths(registered_workspace, demo_dir, monkey
     recent = ws.recent()
     assert f"pair:{demo_dir / 'rig.json'}|{demo_dir / 'recording'}" in recent
     assert f"rig:{demo_dir / 'rig.json'}" in recent
+
+
+def test_two_plants_exports_do_not_replace_each_other(registered_workspace, demo_dir, tmp_path, monkeypatch):
+    """Technician pass (session 14, M2): with a data set's recordings side by side, every plant's
+    Export offered the same folder (`registered-<target>` beside the recordings, and the last
+    export's folder again after opening another plant); Yes to "Replace folder?" then deleted the
+    previous plant's export. The default is now named for the recording, the last folder is
+    offered again only for the same recording and target, and replacing another recording's
+    export says so."""
+    import json
+    import shutil
+
+    from PySide6.QtWidgets import QMessageBox
+
+    ws = registered_workspace
+    data = tmp_path / "set"
+    shutil.copytree(demo_dir, data, ignore=shutil.ignore_patterns("ground_truth", "calibration"))
+    shutil.copytree(data / "recording", data / "plantB")
+    ws.open_pair(data / "rig.json", data / "recording")
+    _wait(lambda: not ws.is_busy())
+    ws.run_registration("ir")
+    _wait(lambda: not ws.is_busy() and ws.result is not None)
+    a = ws.default_export_folder()
+    assert a == data / "recording-registered-ir"
+    assert ws.export(a, ["summary"])
+    _wait(lambda: not ws.is_busy() and (a / "summary.json").is_file())
+    ws.open_pair(data / "rig.json", data / "plantB")
+    _wait(lambda: not ws.is_busy())
+    ws.run_registration("ir")
+    _wait(lambda: not ws.is_busy() and ws.result is not None)
+    b = ws.default_export_folder()
+    assert b == data / "plantB-registered-ir" and b != a
+    assert ws._last_export_key != ws._export_key()  # A's folder is not offered for B
+    asked = []
+    monkeypatch.setattr(QMessageBox, "question", lambda *x, **k: asked.append(x[2]) or QMessageBox.StandardButton.No)
+    assert not ws.export(a, ["summary"])  # into A's export: asked, and the question names A
+    assert len(asked) == 1 and "another recording, recording" in asked[0]
+    assert json.loads((a / "summary.json").read_text())["inputs"]["recording"].endswith("recording")

@@ -334,7 +334,9 @@ def test_export_dialog_needs_a_folder_and_a_part(qapp, tmp_path):
 
 
 def test_export_proposes_a_folder_beside_the_recording(ws, demo_dir):
-    assert ws.default_export_folder() == demo_dir / "registered-ir"
+    # named for the recording: a data set's plants lie side by side, and a shared default folder
+    # let each plant's export replace the last one's (technician pass, session 14, M2)
+    assert ws.default_export_folder() == demo_dir / "recording-registered-ir"
 
 
 def test_recent_files_remember_what_was_opened(ws, demo_dir):

@@ -455,7 +455,9 @@ class RegistrationSession:
             return Path.home()
         if self.is_demo:
             return Path.home() / f"plantreg-demo-registered-{target}"
-        return self.recording_path.parent / f"registered-{target}"
+        # named for the recording: recordings side by side (a data set's plants) would otherwise
+        # share one default folder, and each export replace the last plant's
+        return self.recording_path.parent / f"{self.recording_path.name}-registered-{target}"
 
     def settings_for(self, name: str) -> DisplaySettings:
         return self.display.get(name, DisplaySettings())

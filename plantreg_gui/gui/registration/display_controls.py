@@ -104,8 +104,11 @@ class Histogram(QWidget):
         f = p.font()
         f.setPointSizeF(max(f.pointSizeF() * 0.75, 6.0))
         p.setFont(f)
+        fm = p.fontMetrics()
+        label = "log count"  # said on the widget, not only in its tip
+        p.fillRect(1, 1, fm.horizontalAdvance(label) + 4, fm.height(), QColor(244, 244, 244, 220))
         p.setPen(QColor("#444"))
-        p.drawText(3, p.fontMetrics().ascent() + 1, "log count")  # said on the widget, not only in its tip
+        p.drawText(3, fm.ascent() + 1, label)
         if self.limits is not None:
             p.setPen(QColor("#c00000"))
             for v in self.limits:

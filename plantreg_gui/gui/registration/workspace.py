@@ -41,6 +41,21 @@ from .region_panel import RegionPanel
 from .views import VIEWS, view_key
 
 RECENT_KEY = "workspace/recent"
+
+
+def _export_of_another(folder: Path, recording: Path | None) -> str:
+    """A sentence for the replace question when ``folder`` holds an export of another recording
+    (its summary.json names it); '' otherwise. One plant's export replacing another's is the
+    mistake worth a second look."""
+    import json
+
+    try:
+        rec = json.loads((folder / "summary.json").read_text(encoding="utf-8"))["inputs"]["recording"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""
+    if not isinstance(rec, str) or recording is None or Path(rec) == Path(recording):
+        return ""
+    return f"\nIt holds the registration of another recording, {Path(rec).name} ({rec}): that export would be lost."
 DISPLAY_KEY = "workspace/display"
 MAX_RECENT = 10
 
@@ -90,6 +105,7 @@ class RegistrationWorkspace(QWidget):
         self.setAcceptDrops(True)
         self.session = session or RegistrationSession()
         self.last_export: Path | None = None
+        self._last_export_key: tuple | None = None  # (recording, target) of the last export
         self._workers = Jobs(self, on_progress=self._progress,
                              on_cancelled=lambda t: self.readout.setText(f"{t}: cancelled."),
                              on_end=self._worker_done)
@@ -528,13 +544,19 @@ class RegistrationWorkspace(QWidget):
     def _ask_export(self) -> None:
         if self.session.result is None:
             return
-        start = self.last_export or self.default_export_folder()
+        # the last export's folder is offered again only for the same recording and target
+        last = self.last_export if self._last_export_key == self._export_key() else None
+        start = last or self.default_export_folder()
         dlg = ExportDialog(start, self)
         if dlg.exec():
             self.export(dlg.out(), dlg.what(), drop_mixed=dlg.drop_mixed())
 
     def default_export_folder(self) -> Path:
         return self.session.default_export_folder()
+
+    def _export_key(self) -> tuple:
+        r = self.session.result
+        return (self.session.recording_path, None if r is None else r.target)
 
     def export(self, out: str | Path, what: list[str] | None = None, overwrite: bool = False,
                drop_mixed: bool = False) -> bool:
@@ -563,7 +585,8 @@ class RegistrationWorkspace(QWidget):
         check_output_location(out, "output", folder=True, overwrite=True, inputs=keep, replace_flag=None)
         if folder_is_nonempty(out) and not overwrite:
             ans = QMessageBox.question(self, "Replace folder?",
-                                       f"{out} exists and is not empty.\nReplace it with this export?",
+                                       f"{out} exists and is not empty.{_export_of_another(out, s.recording_path)}"
+                                       "\nReplace it with this export?",
                                        QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No,
                                        QMessageBox.StandardButton.No)
             if ans != QMessageBox.StandardButton.Yes:
@@ -579,6 +602,7 @@ class RegistrationWorkspace(QWidget):
 
     def _exported(self, path: Any) -> None:
         self.last_export = Path(path)
+        self._last_export_key = self._export_key()
         self.readout.setText(f"Exported to {path}")
         self.exported.emit(Path(path))
 
