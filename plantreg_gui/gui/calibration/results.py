@@ -196,13 +196,17 @@ def uncertainty_maps(cal) -> list[dict[str, Any]]:
     out = []
     for name, u in uncertainty(cal).items():
         med, worst = u.summary()
-        lim = limits_px(u)[0]
+        lim, lim_seen = limits_px(u)
         lo, hi = u.band_m
         # short titles (four panels share ~400 px at 1280 x 720): the least certain regions of a
-        # camera within its limits go to the tooltip ("detail"); where to add views stays
+        # camera within its limits go to the tooltip ("detail"); where to add views stays. Each
+        # figure beside its own limit: "worst 1.93 px (limit 1.72) ... within the limits" read as
+        # a contradiction (the limit was the median's; the worst is judged only where boards were seen)
         where = f"add views: {', '.join(u.add_views)}" if u.needs_views else "within the limits"
-        title = f"{name}: σ median {med:.2f}, worst {worst:.2f} px (limit {lim:.2f})\nat {lo:.2f}-{hi:.2f} m: {where}"
-        detail = f"{name}: least certain {', '.join(u.add_views)}" if not u.needs_views and u.add_views else ""
+        title = f"{name}: σ median {med:.2f} (limit {lim:.2f}), seen worst {u.covered_worst:.2f} px\nat {lo:.2f}-{hi:.2f} m: {where}"
+        detail = (f"{name}: worst where boards were seen {u.covered_worst:.2f} px (limit {lim_seen:.2f}); "
+                  f"{worst:.2f} px over the whole image, hatched cells included (not judged)"
+                  + (f"; least certain {', '.join(u.add_views)}" if not u.needs_views and u.add_views else ""))
         out.append({"camera": name, "sigma": u.judged, "corners": u.corners, "limit": lim,
                     "needs_views": u.needs_views,
                     "aspect": u.width / max(u.height, 1), "title": title, "detail": detail})
