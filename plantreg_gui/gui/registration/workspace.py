@@ -41,6 +41,8 @@ from .region_panel import RegionPanel
 from .views import VIEWS, view_key
 
 RECENT_KEY = "workspace/recent"
+DISPLAY_KEY = "workspace/display"
+MAX_RECENT = 10
 
 
 def _export_of_another(folder: Path, recording: Path | None) -> str:
@@ -56,8 +58,6 @@ def _export_of_another(folder: Path, recording: Path | None) -> str:
     if not isinstance(rec, str) or recording is None or Path(rec) == Path(recording):
         return ""
     return f"\nIt holds the registration of another recording, {Path(rec).name} ({rec}): that export would be lost."
-DISPLAY_KEY = "workspace/display"
-MAX_RECENT = 10
 
 
 # ---------------------------------------------------------------------- empty views
